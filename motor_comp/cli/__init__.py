@@ -1,0 +1,1 @@
+"""The ``motor-comp`` command line: one module per subcommand."""

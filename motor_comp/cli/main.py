@@ -1,0 +1,64 @@
+"""``motor-comp`` entry point: dispatch to subcommands, turn errors into one line.
+
+Each subcommand module exposes ``register(subparsers)`` which adds its parser and sets
+``func`` (a callable taking the parsed namespace and returning an exit code).  Errors a
+user can fix are :class:`~motor_comp.errors.MotorCompError`: printed as one line
+``motor-comp: error: …`` with exit status 2; anything else is reported as one line
+too (``MOTOR_COMP_DEBUG=1`` shows the traceback).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+from typing import Sequence
+
+from motor_comp.errors import MotorCompError
+
+#: subcommand modules under motor_comp.cli, in help order
+SUBCOMMANDS: tuple[str, ...] = (
+    'simulate',
+)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's one-line error format (exit status 2)."""
+
+    def error(self, message: str) -> None:  # noqa: D102 - argparse API
+        self.exit(2, f'motor-comp: error: {message}\n')
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full parser with every subcommand registered."""
+    parser = _Parser(prog='motor-comp', description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
+    sub.required = True
+    for name in SUBCOMMANDS:
+        importlib.import_module(f'motor_comp.cli.{name}').register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI; return the process exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except MotorCompError as exc:
+        print(f'motor-comp: error: {exc}', file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print('motor-comp: interrupted', file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+    except Exception as exc:  # noqa: BLE001 - last line of defence: never a traceback
+        if os.environ.get('MOTOR_COMP_DEBUG'):
+            raise
+        print(f'motor-comp: internal error: {type(exc).__name__}: {exc}', file=sys.stderr)
+        return 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,259 @@
+"""The axis model: rigid mass, force input, and a composition of effects.
+
+``M·ẍ = F_in − Σ F_k(x, ẋ, state_k)`` with ``F_in = input_gain·(u − back_emf·ẋ) −
+damping·ẋ`` (DESIGN.md §3).  This one form covers both plants of the source papers:
+
+* PMLM (Tan 2002 eq. 1–7): ``input_gain = k_f/R`` [N/V], ``back_emf = k_e`` [V·s/m];
+* ball-screw (Chiew eq. 1): ``mass = k_f/A``, ``input_gain = k_f``, ``damping = B·k_f/A``,
+  ``C`` as a ``spring`` effect, ``τ`` as a ``delay`` effect.
+
+It is also the model file of the workbench (DESIGN.md §6): :meth:`AxisModel.to_dict`
+and :func:`AxisModel.from_dict` are its YAML form.
+"""
+from __future__ import annotations
+
+import dataclasses
+import enum
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+import yaml
+
+from motor_comp.errors import ModelFileError, ParameterError, check_nonnegative, \
+    check_positive
+from motor_comp.physics.effects import EFFECTS, VOCABULARY, Effect, EffectKind, make_effect
+
+
+class InputKind(enum.Enum):
+    """What the logged command is; ``input_gain`` converts it to newtons."""
+
+    VOLTAGE = 'voltage'
+    CURRENT = 'current'
+    FORCE = 'force'
+
+
+@dataclasses.dataclass(frozen=True)
+class AxisModel:
+    """A rigid single axis with effects.
+
+    Parameters
+    ----------
+    mass : float
+        Moving mass [kg], > 0.
+    input_gain : float
+        Force per unit of command [N/V] (or N/A, or 1 for a force input), > 0.
+    back_emf : float
+        Back-EMF constant [V·s/m] (PMLM ``k_e``); 0 for force-input drives.
+    damping : float
+        Linear plant damping [N·s/m] that belongs to the drive, not to friction
+        (ball-screw ``B·M``); 0 by default.
+    effects : tuple of Effect
+        The effects, at most one of each name, in vocabulary order.
+    input : InputKind
+        The kind of logged command.
+    """
+
+    mass: float = 1.0
+    input_gain: float = 1.0
+    back_emf: float = 0.0
+    damping: float = 0.0
+    effects: tuple = ()
+    input: InputKind = InputKind.VOLTAGE
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, 'mass', check_positive('mass [kg]', self.mass))
+        object.__setattr__(self, 'input_gain', check_positive('input_gain', self.input_gain))
+        object.__setattr__(self, 'back_emf', check_nonnegative('back_emf [V·s/m]',
+                                                               self.back_emf))
+        object.__setattr__(self, 'damping', check_nonnegative('damping [N·s/m]',
+                                                              self.damping))
+        effects = tuple(self.effects)
+        names = [e.name for e in effects]
+        for e in effects:
+            if not isinstance(e, Effect):
+                raise ParameterError(f'effects must be Effect instances, got {e!r}')
+        dup = {n for n in names if names.count(n) > 1}
+        if dup:
+            raise ParameterError(f'effect {sorted(dup)[0]!r} appears twice')
+        effects = tuple(sorted(effects, key=lambda e: VOCABULARY.index(e.name)))
+        object.__setattr__(self, 'effects', effects)
+        if not isinstance(self.input, InputKind):
+            try:
+                object.__setattr__(self, 'input', InputKind(self.input))
+            except ValueError:
+                raise ParameterError(
+                    f'input must be one of {[k.value for k in InputKind]}, '
+                    f'got {self.input!r}') from None
+        st = self.get('stribeck')
+        if st is not None and st.fs < self.fc:
+            raise ParameterError(
+                f'stribeck.fs [N] ({st.fs:g}) must be >= coulomb.fc [N] ({self.fc:g})')
+
+    # -- composition ---------------------------------------------------------------
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Names of the effects present."""
+        return tuple(e.name for e in self.effects)
+
+    def get(self, name: str) -> Effect | None:
+        """The effect called ``name``, or None."""
+        for e in self.effects:
+            if e.name == name:
+                return e
+        return None
+
+    def has(self, name: str) -> bool:
+        """Whether the model has the effect ``name``."""
+        return self.get(name) is not None
+
+    def with_effect(self, effect: Effect) -> 'AxisModel':
+        """A copy with ``effect`` added or replacing the one of the same name."""
+        rest = tuple(e for e in self.effects if e.name != effect.name)
+        return dataclasses.replace(self, effects=rest + (effect,))
+
+    def without(self, *names: str) -> 'AxisModel':
+        """A copy without the named effects."""
+        return dataclasses.replace(
+            self, effects=tuple(e for e in self.effects if e.name not in names))
+
+    def replace(self, **changes: Any) -> 'AxisModel':
+        """A copy with some top-level fields changed."""
+        return dataclasses.replace(self, **changes)
+
+    # -- convenience views used by controllers and the workbench -------------------
+    @property
+    def fc(self) -> float:
+        """Coulomb level [N] (0 without a coulomb effect)."""
+        e = self.get('coulomb')
+        return e.fc if e is not None else 0.0
+
+    @property
+    def fv(self) -> float:
+        """Viscous coefficient [N·s/m] (0 without a viscous effect)."""
+        e = self.get('viscous')
+        return e.fv if e is not None else 0.0
+
+    def stribeck_curve_params(self) -> tuple[float, float, float, float]:
+        """``(fc, fs, vs, delta)`` of the static curve; fs = fc without stribeck."""
+        st = self.get('stribeck')
+        if st is None:
+            return self.fc, self.fc, 1e-3, 1.0
+        return self.fc, st.fs, st.vs, st.delta
+
+    def input_force(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Drive force [N] ``input_gain·(u − back_emf·v) − damping·v``."""
+        u = np.asarray(u, dtype=float)
+        v = np.asarray(v, dtype=float)
+        return self.input_gain * (u - self.back_emf * v) - self.damping * v
+
+    # -- model file ----------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """The model-file mapping of DESIGN.md §6 (SI units)."""
+        return {
+            'input': self.input.value,
+            'input_gain': float(self.input_gain),
+            'back_emf': float(self.back_emf),
+            'damping': float(self.damping),
+            'mass': float(self.mass),
+            'effects': {e.name: e.params() for e in self.effects},
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], *, source: str = 'model') -> 'AxisModel':
+        """Build from a model-file mapping; errors name ``source`` and the field."""
+        if not isinstance(data, Mapping):
+            raise ModelFileError(f'{source}: expected a mapping at top level')
+        known = {'input', 'input_gain', 'back_emf', 'damping', 'mass', 'effects'}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ModelFileError(f'{source}: unknown field {unknown[0]!r} '
+                                 f'(expected {sorted(known)})')
+        if 'mass' not in data:
+            raise ModelFileError(f'{source}: missing field \'mass\'')
+        effects_data = data.get('effects') or {}
+        if not isinstance(effects_data, Mapping):
+            raise ModelFileError(f'{source}: effects must be a mapping name -> parameters')
+        try:
+            effects = []
+            for name, params in effects_data.items():
+                if name not in EFFECTS:
+                    raise ModelFileError(f'{source}: unknown effect {name!r} '
+                                         f'(known: {", ".join(VOCABULARY)})')
+                if params is not None and not isinstance(params, Mapping):
+                    raise ModelFileError(f'{source}: effects.{name} must be a mapping')
+                effects.append(make_effect(name, params))
+            return cls(mass=data['mass'], input_gain=data.get('input_gain', 1.0),
+                       back_emf=data.get('back_emf', 0.0), damping=data.get('damping', 0.0),
+                       effects=tuple(effects), input=data.get('input', 'voltage'))
+        except ParameterError as exc:
+            raise ModelFileError(f'{source}: {exc}') from None
+
+    @classmethod
+    def load(cls, path: str | Path) -> 'AxisModel':
+        """Read a model YAML file (one-line :class:`ModelFileError` on any problem)."""
+        path = Path(path)
+        try:
+            with path.open('r', encoding='utf-8') as fh:
+                data = yaml.safe_load(fh)
+        except FileNotFoundError:
+            raise ModelFileError(f'{path}: no such model file') from None
+        except IsADirectoryError:
+            raise ModelFileError(f'{path}: is a directory, expected a model YAML file') \
+                from None
+        except (yaml.YAMLError, UnicodeDecodeError) as exc:
+            line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise ModelFileError(f'{path}: not valid YAML ({line})') from None
+        if data is None:
+            raise ModelFileError(f'{path}: empty model file')
+        return cls.from_dict(data, source=str(path))
+
+    def save(self, path: str | Path) -> None:
+        """Write the model YAML file."""
+        with Path(path).open('w', encoding='utf-8') as fh:
+            yaml.safe_dump(self.to_dict(), fh, sort_keys=False)
+
+    # -- memoryless force sum (workbench inverse model) ----------------------------
+    def static_force(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Σ of the memoryless effect forces [N] at (x, v).
+
+        The sliding friction of a model with ``presliding`` is carried by its GMS
+        elements (see :meth:`effect_forces`); here it is replaced by the static curve,
+        which the GMS force equals at constant velocity.
+        """
+        return sum(self.effect_forces(x, v, dt=None).values(), np.zeros(np.shape(x)))
+
+    def effect_forces(self, x: np.ndarray, v: np.ndarray, *,
+                      dt: float | None = None) -> dict[str, np.ndarray]:
+        """Force [N] of each force effect along samples (x [m], v [m/s]).
+
+        With ``dt`` [s] the samples are taken as a trajectory and ``presliding`` is
+        simulated along it (its force then replaces coulomb + stribeck, which it
+        contains); without ``dt``, presliding contributes its steady-state curve.
+        """
+        x = np.asarray(x, dtype=float)
+        v = np.asarray(v, dtype=float)
+        fc, fs, vs, delta = self.stribeck_curve_params()
+        out: dict[str, np.ndarray] = {}
+        gms = self.get('presliding')
+        for e in self.effects:
+            if e.kind is not EffectKind.FORCE:
+                continue
+            if e.name == 'stribeck':
+                f = e.force(x, v, fc=fc)
+            elif e.name == 'presliding':
+                continue
+            else:
+                f = e.force(x, v)
+            out[e.name] = f
+        if gms is not None and dt is not None:
+            f_gms = gms.force_along(x, dt, fc=fc, fs=fs, vs=vs, delta=delta)
+            out.pop('coulomb', None)
+            out.pop('stribeck', None)
+            out['presliding'] = f_gms
+        return out
+
+
+def effects_from(items: Iterable[tuple[str, Mapping[str, Any]]]) -> tuple[Effect, ...]:
+    """Effects from ``(name, params)`` pairs."""
+    return tuple(make_effect(n, p) for n, p in items)

@@ -1,0 +1,63 @@
+"""The effect protocol shared by every physical effect of DESIGN.md §3.
+
+An effect is a frozen dataclass of validated SI parameters plus its force law.  The
+model file (DESIGN.md §6) stores each effect as ``name: {param: value, ...}``;
+:meth:`Effect.params` and :meth:`Effect.from_params` convert to and from that form.
+"""
+from __future__ import annotations
+
+import dataclasses
+import enum
+from typing import Any, ClassVar, Mapping
+
+from motor_comp.errors import ParameterError
+
+
+class EffectKind(enum.Enum):
+    """Where an effect acts on the axis."""
+
+    FORCE = 'force'    #: a force subtracted in ``M·ẍ = F_in − Σ F_k``
+    INPUT = 'input'    #: acts on the command before it becomes force (delay)
+    OUTPUT = 'output'  #: acts between motor and measured load position (backlash)
+
+
+@dataclasses.dataclass(frozen=True)
+class Effect:
+    """Base class: one physical effect with validated SI parameters."""
+
+    name: ClassVar[str] = ''
+    kind: ClassVar[EffectKind] = EffectKind.FORCE
+    #: human wording used in diagnose output, e.g. "Coulomb friction"
+    title: ClassVar[str] = ''
+
+    def params(self) -> dict[str, Any]:
+        """Parameters in model-file form (DESIGN.md §6 table), SI units."""
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, tuple):
+                v = [list(e) if isinstance(e, tuple) else float(e) for e in v]
+            else:
+                v = float(v)
+            out[f.name] = v
+        return out
+
+    @classmethod
+    def from_params(cls, params: Mapping[str, Any] | None) -> 'Effect':
+        """Build from a model-file mapping; unknown or missing keys raise ParameterError."""
+        params = dict(params or {})
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(params) - names)
+        if unknown:
+            raise ParameterError(
+                f'{cls.name}: unknown parameter {unknown[0]!r} (expected {sorted(names)})')
+        try:
+            return cls(**params)
+        except TypeError as exc:  # missing required field
+            missing = [n for n in names if n not in params]
+            raise ParameterError(
+                f'{cls.name}: missing parameter {missing[0] if missing else ""!r}') from exc
+
+    def replace(self, **changes: Any) -> 'Effect':
+        """Return a copy with some parameters changed (validated again)."""
+        return dataclasses.replace(self, **changes)

@@ -1,0 +1,68 @@
+"""Packaging for motor_comp: ament_python for colcon, plain setuptools for pip."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'motor_comp'
+
+NODES = ('trajectory_node', 'plant_node', 'controller_node', 'recorder_node')
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(include=[PACKAGE, PACKAGE + '.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml']),
+        ('share/' + PACKAGE + '/config', sorted(glob('config/*.yaml'))),
+        ('share/' + PACKAGE + '/launch', sorted(glob('launch/*.py'))),
+    ],
+    package_data={PACKAGE: ['config/*.yaml']},
+    include_package_data=True,
+    python_requires='>=3.10,<3.13',
+    install_requires=[
+        'numpy>=1.24',
+        'scipy>=1.10',
+        'numba>=0.58',
+        'pyyaml>=6.0',
+        'mcap>=1.1',
+        'mcap-ros2-support>=0.5',
+        'matplotlib>=3.7',
+        'setuptools',
+    ],
+    extras_require={
+        # PyPI wheels of ROS 2 Jazzy for machines without a system ROS install.
+        'ros': [
+            'ros-jazzy-rclpy',
+            'ros-jazzy-std-msgs',
+            'ros-jazzy-sensor-msgs',
+            'ros-jazzy-rosgraph-msgs',
+            'ros-jazzy-rmw-fastrtps-cpp',
+        ],
+        'test': [
+            'pytest>=7',
+            'pytest-timeout',
+            'hypothesis>=6',
+            'flake8',
+            'pydocstyle',
+            'rosbags>=0.9',
+            'control>=0.9.4',
+            'colcon-common-extensions',
+        ],
+        'bench': [
+            'rosbags>=0.9',
+            'control>=0.9.4',
+        ],
+    },
+    zip_safe=True,
+    maintainer='motor_comp developers',
+    maintainer_email='motor-comp@example.org',
+    description='Precision servo axis simulation, friction/ripple compensation and model workbench',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'motor-comp = motor_comp.cli.main:main',
+        ] + [f'{n} = motor_comp.nodes.{n}:main' for n in NODES],
+    },
+)
