@@ -45,6 +45,8 @@ setup(
             'hypothesis>=6',
             'flake8',
             'pydocstyle',
+            # ament's flake8 front end, as colcon test runs it (test/test_lint.py)
+            'ros-jazzy-ament-flake8',
             'rosbags>=0.9',
             'control>=0.9.4',
             'colcon-common-extensions',
@@ -57,7 +59,8 @@ setup(
     zip_safe=True,
     maintainer='motor_comp developers',
     maintainer_email='motor-comp@example.org',
-    description='Precision servo axis simulation, friction/ripple compensation and model workbench',
+    description=('Precision servo axis simulation, friction/ripple compensation and '
+                 'model workbench'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

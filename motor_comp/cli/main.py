@@ -18,7 +18,16 @@ from motor_comp.errors import MotorCompError
 
 #: subcommand modules under motor_comp.cli, in help order
 SUBCOMMANDS: tuple[str, ...] = (
+    'compare',
+    'diagnose',
+    'fit',
     'simulate',
+    'sweep',
+    'analyze',
+    'import_cmd',
+    'run',
+    'replay',
+    'demo',
 )
 
 

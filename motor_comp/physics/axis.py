@@ -69,10 +69,10 @@ class AxisModel:
         object.__setattr__(self, 'damping', check_nonnegative('damping [N·s/m]',
                                                               self.damping))
         effects = tuple(self.effects)
-        names = [e.name for e in effects]
         for e in effects:
             if not isinstance(e, Effect):
                 raise ParameterError(f'effects must be Effect instances, got {e!r}')
+        names = [e.name for e in effects]
         dup = {n for n in names if names.count(n) > 1}
         if dup:
             raise ParameterError(f'effect {sorted(dup)[0]!r} appears twice')
@@ -97,7 +97,7 @@ class AxisModel:
         return tuple(e.name for e in self.effects)
 
     def get(self, name: str) -> Effect | None:
-        """The effect called ``name``, or None."""
+        """Return the effect called ``name``, or None."""
         for e in self.effects:
             if e.name == name:
                 return e
@@ -108,17 +108,17 @@ class AxisModel:
         return self.get(name) is not None
 
     def with_effect(self, effect: Effect) -> 'AxisModel':
-        """A copy with ``effect`` added or replacing the one of the same name."""
+        """Return a copy with ``effect`` added or replacing the one of the same name."""
         rest = tuple(e for e in self.effects if e.name != effect.name)
         return dataclasses.replace(self, effects=rest + (effect,))
 
     def without(self, *names: str) -> 'AxisModel':
-        """A copy without the named effects."""
+        """Return a copy without the named effects."""
         return dataclasses.replace(
             self, effects=tuple(e for e in self.effects if e.name not in names))
 
     def replace(self, **changes: Any) -> 'AxisModel':
-        """A copy with some top-level fields changed."""
+        """Return a copy with some top-level fields changed."""
         return dataclasses.replace(self, **changes)
 
     # -- convenience views used by controllers and the workbench -------------------
@@ -149,7 +149,7 @@ class AxisModel:
 
     # -- model file ----------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        """The model-file mapping of DESIGN.md §6 (SI units)."""
+        """Return the model-file mapping of DESIGN.md §6 (SI units)."""
         return {
             'input': self.input.value,
             'input_gain': float(self.input_gain),

@@ -75,14 +75,28 @@ class PlantConfig:
     source: str = ''
 
     def with_model(self, model: AxisModel) -> 'PlantConfig':
-        """A copy with another axis model."""
+        """Return a copy with another axis model."""
         return dataclasses.replace(self, model=model)
+
+
+#: the keys of a plant file and of its sections (a typo must not fall back to a default)
+_PLANT_KEYS = ('plant', 'motor', 'effects', 'sensors', 'rates')
+_SECTION_KEYS = {'sensors': ('encoder_resolution_m', 'noise_std_m', 'saturation_V'),
+                 'rates': ('physics_hz', 'control_hz')}
+
+
+def _check_keys(data: Mapping[str, Any], known: tuple[str, ...], where: str) -> None:
+    unknown = sorted(str(k) for k in data if k not in known)
+    if unknown:
+        raise ModelFileError(f'{where}: unknown field {unknown[0]!r} (expected {list(known)})')
 
 
 def _section(data: Mapping[str, Any], key: str, source: str) -> Mapping[str, Any]:
     sec = data.get(key) or {}
     if not isinstance(sec, Mapping):
         raise ModelFileError(f'{source}: {key} must be a mapping')
+    if key in _SECTION_KEYS:
+        _check_keys(sec, _SECTION_KEYS[key], f'{source}: {key}')
     return sec
 
 
@@ -90,6 +104,7 @@ def plant_from_dict(data: Mapping[str, Any], *, source: str = 'plant') -> PlantC
     """Build a :class:`PlantConfig` from the plant YAML layout of ``config/``."""
     if not isinstance(data, Mapping):
         raise ModelFileError(f'{source}: expected a mapping at top level')
+    _check_keys(data, _PLANT_KEYS, source)
     try:
         kind = PlantKind(data.get('plant'))
     except ValueError:

@@ -9,19 +9,21 @@ parameter vector ``P`` and mutates a state vector ``S`` (layouts below, built by
 Integration (DESIGN.md §3): the smooth part by classical RK4 with the friction
 direction frozen over the step; GMS elements updated exactly per step; Coulomb/Stribeck
 stick–slip by a Karnopp-style switch — an axis at rest stays at rest while the net drive
-force lies inside the break-away band, and a velocity zero-crossing inside a step ends
-the step at rest instead of chattering through zero.
+force lies inside the break-away band.  A velocity zero-crossing inside a step is an
+event: the step is integrated up to it, and the rest of the step is spent at rest or, if
+the net force exceeds the break-away level there, sliding the other way.  So the axis
+neither chatters through zero nor dwells at a reversal it should pass (a frictionless
+oscillator keeps its period).
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from motor_comp.physics.effects.asymmetry import asymmetry_force
 from motor_comp.physics.effects.backlash import play
 from motor_comp.physics.effects.presliding import MAX_ELEMENTS, gms_update
 from motor_comp.physics.effects.ripple import MAX_HARMONICS, ripple_force
-from motor_comp.physics.effects.stribeck import stribeck_curve, stribeck_magnitude
+from motor_comp.physics.effects.stribeck import stribeck_magnitude
 
 # ---- parameter vector P -----------------------------------------------------------
 P_MASS, P_GAIN, P_BEMF, P_DAMP = 0, 1, 2, 3
@@ -73,6 +75,24 @@ def _sliding_friction(P, v, d):
     fc = P[P_FC] + d * shift
     fs = P[P_FS] + d * shift
     return d * stribeck_magnitude(abs(v), fc, fs, P[P_VS], P[P_DELTA])
+
+
+@njit(cache=True)
+def _breakaway(P, x, u, f_ext):
+    """At rest at ``x``: direction (±1) in which the axis breaks away, or 0 if held.
+
+    Returns ``(direction, net force [N])``; the break-away band is ``[−fs−, fs+]`` with
+    the direction-dependent levels ``fs± = fs ± dfc/2``.  A level below zero (|dfc| > 2·fs,
+    which the workbench may fit) counts as zero: rest with no net force stays rest, as
+    the force laws say at v = 0, instead of breaking away on its own.
+    """
+    f_net = _drive_force(P, x, 0.0, u, f_ext)
+    shift = 0.5 * P[P_DFC]
+    if f_net > max(P[P_FS] + shift, 0.0):
+        return 1.0, f_net
+    if f_net < -max(P[P_FS] - shift, 0.0):
+        return -1.0, f_net
+    return 0.0, f_net
 
 
 @njit(cache=True)
@@ -131,6 +151,41 @@ def _delayed_command(P, S, u):
 
 
 @njit(cache=True)
+def _static_friction_step(P, x, v, u, f_ext, dt):
+    """One step of the static (Coulomb/Stribeck/viscous) friction model with stick–slip.
+
+    Karnopp-style switch with event location: at rest the axis stays while the net force
+    is inside the break-away band; while sliding, RK4 runs with the friction direction
+    frozen, and if the velocity reaches zero inside the step the integration stops at the
+    zero-crossing (located by linear interpolation of v, then integrated exactly up to
+    it) and the remaining time is spent stuck or sliding the other way.
+
+    Returns
+    -------
+    (x [m], v [m/s], step-averaged friction [N], stuck flag)
+    """
+    t_left = dt
+    impulse = 0.0                 # ∫ friction dt over the parts of the step done so far
+    d = np.sign(v)
+    for _ in range(3):            # slide → rest → slide back; a third event ends at rest
+        if d == 0.0:
+            d, f_net = _breakaway(P, x, u, f_ext)
+            if d == 0.0:          # static friction balances the net force
+                return x, 0.0, (impulse + f_net * t_left) / dt, 1.0
+        xn, vn, f = _rk4_frozen(P, x, v, u, f_ext, d, 0.0, 0.0, t_left)
+        if vn * d > 0.0:
+            return xn, vn, (impulse + f * t_left) / dt, 0.0
+        tc = t_left * v / (v - vn) if v != vn else 0.0
+        if tc > 0.0:
+            xn, _, f = _rk4_frozen(P, x, v, u, f_ext, d, 0.0, 0.0, tc)
+        impulse += f * tc
+        x, v, d = xn, 0.0, 0.0
+        t_left -= tc
+    _, f_net = _breakaway(P, x, u, f_ext)
+    return x, 0.0, (impulse + f_net * t_left) / dt, 1.0
+
+
+@njit(cache=True)
 def plant_substep(P, S, u, f_ext):
     """Advance the axis by one physics step ``P[P_DT]`` with command ``u`` and load ``f_ext``.
 
@@ -155,7 +210,6 @@ def plant_substep(P, S, u, f_ext):
     S[S_UEFF] = u
     x = S[S_X]
     v = S[S_V]
-    xn, vn = x, v
     if P[P_GMS_ON] > 0.5:
         n = int(P[P_GMS_N])
         forces = S[S_GMS_F:S_GMS_F + n]
@@ -166,34 +220,14 @@ def plant_substep(P, S, u, f_ext):
             if slip[i] == 0.0:
                 k_stick += P[P_GMS_K + i]
         xn, vn, _ = _rk4_frozen(P, x, v, u, f_ext, 0.0, f_gms, k_stick, dt)
-        s_v = stribeck_curve(vn, P[P_FC], P[P_FS], P[P_VS], P[P_DELTA])
+        # the elements follow the direction-dependent Stribeck curve (fc±, fs± of the
+        # asymmetry effect), so asymmetry acts on the dynamics, not only on the report
+        s_v = _sliding_friction(P, vn, np.sign(vn))
         f_fric = gms_update(forces, slip, P[P_GMS_ALPHA:P_GMS_ALPHA + n],
                             P[P_GMS_K:P_GMS_K + n], P[P_GMS_C], xn - x, vn, s_v, dt)
-        f_fric += asymmetry_force(vn, P[P_DFC], 0.0)
     else:
-        f_fric = 0.0
-        d = np.sign(v)
-        if d == 0.0:
-            # at rest: stay unless the net force leaves the break-away band
-            f_net = _drive_force(P, x, 0.0, u, f_ext)
-            shift = 0.5 * P[P_DFC]
-            if f_net > P[P_FS] + shift:
-                d = 1.0
-            elif f_net < -(P[P_FS] - shift):
-                d = -1.0
-            else:
-                S[S_STUCK] = 1.0
-                f_fric = f_net  # static friction balances the net force
-                xn, vn = x, 0.0
-        if d != 0.0:
-            S[S_STUCK] = 0.0
-            xn, vn, f_fric = _rk4_frozen(P, x, v, u, f_ext, d, 0.0, 0.0, dt)
-            if vn * d <= 0.0:
-                # velocity reached zero inside the step: end the step at rest
-                tc = dt * v / (v - vn) if v != vn else 0.0
-                xn = x + 0.5 * v * tc
-                vn = 0.0
-                S[S_STUCK] = 1.0
+        xn, vn, f_fric, stuck = _static_friction_step(P, x, v, u, f_ext, dt)
+        S[S_STUCK] = stuck
     S[S_X] = xn
     S[S_V] = vn
     S[S_FRICTION] = f_fric
@@ -214,7 +248,7 @@ def plant_advance(P, S, u, f_ext, n_sub):
 
 @njit(cache=True)
 def plant_measure(P, S, noise, dt_meas):
-    """Encoder reading of the load position and its backward-difference velocity.
+    """Read the encoder: load position and its backward-difference velocity.
 
     Parameters
     ----------

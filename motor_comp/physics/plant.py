@@ -41,8 +41,12 @@ class Sensors:
             'encoder_resolution [m]', self.encoder_resolution))
         object.__setattr__(self, 'noise_std', check_nonnegative('noise_std [m]',
                                                                 self.noise_std))
-        sat = float(self.saturation)
-        if not sat > 0.0:
+        try:
+            sat = float(self.saturation)
+        except (TypeError, ValueError):
+            raise ParameterError(
+                f'saturation [V] must be a number, got {self.saturation!r}') from None
+        if not sat > 0.0:  # inf (no limit) is allowed, NaN is not
             raise ParameterError(f'saturation [V] must be > 0, got {sat:g}')
         object.__setattr__(self, 'saturation', sat)
 
@@ -122,7 +126,7 @@ def pack_params(model: AxisModel, sensors: Sensors, dt: float) -> np.ndarray:
 
 
 def initial_state(P: np.ndarray, x0: float = 0.0) -> np.ndarray:
-    """A state vector at rest at ``x0`` [m], sized for the packed dead time."""
+    """Return a state vector at rest at ``x0`` [m], sized for the packed dead time."""
     nbuf = int(math.ceil(P[K.P_DELAY_STEPS])) + 2 if P[K.P_DELAY_STEPS] > 0 else 0
     S = np.zeros(K.S_BASE + nbuf)
     S[K.S_X] = S[K.S_XL] = S[K.S_YPREV] = x0
@@ -198,7 +202,7 @@ class Plant:
         K.plant_advance(self.params, self.state, float(u), f, self.substeps(dt_control))
 
     def noise_sample(self) -> float:
-        """The next measurement-noise sample [m] (0 without noise)."""
+        """Draw the next measurement-noise sample [m] (0 without noise)."""
         sd = self.sensors.noise_std
         return float(self._rng.normal(0.0, sd)) if sd > 0 else 0.0
 

@@ -12,7 +12,10 @@ from motor_comp.physics.effects.base import Effect
 
 @njit(cache=True)
 def coulomb_force(v, fc):
-    """Coulomb force [N] opposing velocity ``v`` [m/s]; zero at rest (stiction is the integrator's)."""
+    """Return the Coulomb force [N] opposing velocity ``v`` [m/s].
+
+    Zero at rest: holding the axis there (stiction) is the integrator's job.
+    """
     return fc * np.sign(v)
 
 

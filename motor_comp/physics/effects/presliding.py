@@ -3,7 +3,8 @@
 N elementary blocks, each a spring ``k_i`` [N/m] with a slip limit ``α_i·|s(v)|``
 (Chiew et al. eq. 3–5, DESIGN.md §3):
 
-* sticking:  ``dF_i/dt = k_i·v``            until ``|F_i| ≥ α_i·|s(v)|``;
+* sticking:  ``dF_i/dt = k_i·v``            until ``F_i`` reaches ``α_i·s(v)`` (signed:
+  in the direction of motion; an element loaded against the motion unloads elastically);
 * slipping:  ``dF_i/dt = c·(α_i·s(v) − F_i)`` until the velocity reverses.
 
 ``s(v)`` is the *signed* Stribeck curve (the unsigned form is unstable for v < 0).
@@ -61,11 +62,15 @@ def gms_update(forces, slip, alpha, k, c, dx, v, s_v, dt):
         if slip[i] == 0.0:
             f = forces[i] + k[i] * dx
             lim = alpha[i] * abs(s_v)
-            if abs(f) >= lim and lim > 0.0 and np.sign(f) == sv:
+            # slip starts when F_i reaches α_i·s(v) in the direction of motion (Chiew
+            # eq. 3–4).  An element still loaded against the motion (after a reversal
+            # into a lower |s(v)|) keeps unloading elastically: clamping it to α_i|s(v)|
+            # would make the force jump by up to α_i·(fs − fc) on a nanometre step.
+            # (at rest, sv = 0, nothing slips; with no friction level, s = 0, an element
+            # moving carries no force instead of acting as an unlimited spring)
+            if sv != 0.0 and abs(f) >= lim and np.sign(f) == sv:
                 f = np.sign(f) * lim
                 slip[i] = sv
-            elif abs(f) > lim and lim > 0.0:
-                f = np.sign(f) * lim
             forces[i] = f
         else:
             target = alpha[i] * s_v

@@ -1,4 +1,7 @@
-"""Position-proportional force ``F = k·(x − x0)`` [N] (cable carrier, flexure, C of Chiew eq. 1)."""
+"""Position-proportional force ``F = k·(x − x0)`` [N].
+
+Cable carrier, flexure, or the ``C`` term of Chiew eq. 1.
+"""
 from __future__ import annotations
 
 import dataclasses

@@ -30,7 +30,7 @@ def stribeck_curve(v, fc, fs, vs, delta):
 
 @njit(cache=True)
 def stribeck_force(v, fc, fs, vs, delta):
-    """The Stribeck term alone, ``(fs−fc)·e^{−|v/vs|^δ}·sgn(v)`` [N]."""
+    """Return the Stribeck term alone, ``(fs−fc)·e^{−|v/vs|^δ}·sgn(v)`` [N]."""
     return (fs - fc) * np.exp(-np.abs(v / vs) ** delta) * np.sign(v)
 
 

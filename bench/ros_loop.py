@@ -1,0 +1,172 @@
+#!/usr/bin/env python3
+"""ROS loop speed: lockstep steps/s and realtime jitter, beside a bare rclpy round trip.
+
+Three measurements in the same run, same machine, same DDS (Fast DDS, localhost only,
+private domain):
+
+1. reference — a bare two-process rclpy ping-pong of ``std_msgs/Float64`` with the
+   nodes' QoS, spun by rclpy's ``SingleThreadedExecutor`` (plain rclpy) and by the
+   nodes' :class:`~motor_comp.nodes.common.LeanLoop` (wait-set loop): the ceiling of
+   any lockstep loop (a lockstep control step needs at least one plant↔controller
+   round trip);
+2. lockstep — ``motor-comp run`` machinery, four node processes + recorder, control
+   steps per second of wall time (goal ≥ 2000 = 2× real time at 1 kHz);
+3. realtime — the same nodes on wall-clock timers at 1 kHz: the period between
+   successive plant ticks (joint_states stamps) and between commands arriving at the
+   recorder, p50/p99 of |period − 1 ms| (goal p99 < 0.5 ms).
+
+Usage: ``python bench/ros_loop.py [--steps N] [--lockstep-s S] [--realtime-s S]``.
+"""
+from __future__ import annotations
+
+import argparse
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from motor_comp.cli.run import RunSpec, private_domain_id, ros_environment, run_nodes
+
+
+def _pingpong(role: str, n: int, loop: str) -> None:
+    """One side of the bare round trip (runs in its own process)."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import Float64
+
+    from motor_comp.nodes.common import LOOP_QOS, LeanLoop, ParamNode, SUB_QOS
+
+    rclpy.init()
+    node = ParamNode(f'bench_{role}')
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    lean = LeanLoop(node)
+    out, inp = ('ping', 'pong') if role == 'ping' else ('pong', 'ping')
+    pub = node.create_publisher(Float64, out, LOOP_QOS)
+    state = {'n': 0, 't0': 0.0}
+    msg = Float64()
+
+    def on_msg(m: Float64) -> None:
+        state['n'] += 1
+        if role == 'ping' and state['n'] == 1:
+            state['t0'] = time.perf_counter()
+        msg.data = m.data + 1.0
+        if role == 'pong' or state['n'] < n:
+            pub.publish(msg)
+
+    node.mark_hot(node.create_subscription(Float64, inp, on_msg, SUB_QOS))
+    deadline = time.monotonic() + 60.0
+
+    def spin() -> None:
+        if loop == 'lean':
+            lean.spin_once(500_000_000)
+        else:
+            ex.spin_once(timeout_sec=0.5)
+
+    if role == 'ping':
+        while pub.get_subscription_count() < 1 or node.count_publishers(inp) < 1:
+            ex.spin_once(timeout_sec=0.05)
+        time.sleep(0.5)
+        pub.publish(msg)
+        while state['n'] < n and time.monotonic() < deadline:
+            spin()
+        print(f'{(state["n"] - 1) / (time.perf_counter() - state["t0"]):.1f}')
+    else:
+        while time.monotonic() < deadline and state['n'] < n:
+            spin()
+    rclpy.shutdown()
+
+
+def bare_round_trip(n: int, loop: str) -> float:
+    """Round trips per second of the two-process ping-pong."""
+    env = ros_environment(private_domain_id())
+    args = ['--steps', str(n), '--loop', loop]
+    pong = subprocess.Popen([sys.executable, __file__, '--role', 'pong', *args], env=env)
+    try:
+        out = subprocess.run([sys.executable, __file__, '--role', 'ping', *args],
+                             env=env, capture_output=True, text=True, timeout=120)
+        return float(out.stdout.strip().splitlines()[-1])
+    finally:
+        pong.kill()
+        pong.wait()
+
+
+_LOG_TIME = re.compile(r'\[INFO\] \[(\d+\.\d+)\] \[[^\]]*plant_node\]: (.*)')
+
+
+def lockstep_rate(duration: float, workdir: Path) -> tuple[float, int]:
+    """Control steps per wall second of a lockstep run of ``duration`` sim seconds."""
+    spec = RunSpec(output=workdir / 'lockstep.mcap', plant='pmlm', controller='pid',
+                   duration=duration)
+    run_nodes(spec, workdir=workdir, domain_id=private_domain_id(), progress=False)
+    start = end = None
+    for line in (workdir / 'plant_node.log').read_text().splitlines():
+        m = _LOG_TIME.search(line)
+        if not m:
+            continue
+        if m.group(2).startswith('peers matched'):
+            start = float(m.group(1))
+        elif m.group(2).startswith('run complete'):
+            end = float(m.group(1))
+    steps = int(round(duration * 1000))
+    return steps / (end - start), steps
+
+
+def realtime_jitter(duration: float, workdir: Path) -> dict[str, np.ndarray]:
+    """Periods [s] of plant ticks and of commands received, from a realtime recording."""
+    from mcap.reader import make_reader
+    spec = RunSpec(output=workdir / 'realtime.mcap', plant='pmlm', controller='pid',
+                   timing='realtime', duration=duration)
+    run_nodes(spec, workdir=workdir, domain_id=private_domain_id(), progress=False)
+    times: dict[str, list[int]] = {}
+    with open(spec.output, 'rb') as f:
+        for _, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            times.setdefault(channel.topic, []).append(message.log_time)
+    out = {}
+    for topic in ('/axis/joint_states', '/axis/voltage'):
+        t = np.sort(np.array(times[topic], dtype=np.int64))
+        n = len(t)
+        out[topic] = np.diff(t[n // 10:]) * 1e-9   # skip the start-up transient
+    return out
+
+
+def main() -> int:
+    """Run the three measurements and print the table."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--role', choices=('ping', 'pong'))
+    ap.add_argument('--steps', type=int, default=5000)
+    ap.add_argument('--loop', choices=('executor', 'lean'), default='executor')
+    ap.add_argument('--lockstep-s', type=float, default=10.0)
+    ap.add_argument('--realtime-s', type=float, default=5.0)
+    args = ap.parse_args()
+    if args.role:
+        _pingpong(args.role, args.steps, args.loop)
+        return 0
+    rt = bare_round_trip(args.steps, 'executor')
+    rt_lean = bare_round_trip(args.steps, 'lean')
+    with tempfile.TemporaryDirectory() as tmp:
+        rate, steps = lockstep_rate(args.lockstep_s, Path(tmp))
+    with tempfile.TemporaryDirectory() as tmp:
+        jit = realtime_jitter(args.realtime_s, Path(tmp))
+    print(f'{"measurement":<46} {"value":>12} {"ratio":>10}')
+    print('-' * 70)
+    print(f'{"bare 2-process rclpy round trips/s (reference)":<46} {rt:>12.0f} '
+          f'{1.0:>10.2f}   (SingleThreadedExecutor.spin_once)')
+    print(f'{"bare 2-process round trips/s, LeanLoop":<46} {rt_lean:>12.0f} '
+          f'{rt_lean / rt:>10.2f}   (wait-set loop the nodes use)')
+    print(f'{"lockstep control steps/s, 4 nodes + recorder":<46} {rate:>12.0f} '
+          f'{rate / rt:>10.2f}   ({steps} steps; ×{rate / 1000:.2f} real time at 1 kHz)')
+    for topic, per in jit.items():
+        dev = np.abs(per - 1e-3) * 1e3
+        print(f'{"realtime " + topic + " |period-1ms| p50/p99 [ms]":<46} '
+              f'{np.percentile(dev, 50):>6.3f}/{np.percentile(dev, 99):<6.3f}'
+              f'   mean period {per.mean() * 1e3:.4f} ms, n={per.size}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,104 @@
+"""``motor-comp analyze``: tracking error and quadrant glitches of recorded runs.
+
+Prints a table per run (several runs side by side, with the relative change against
+the first), or with ``--json`` one object ``{"runs": [...]}`` (DESIGN.md §6 keys).
+``--report DIR`` writes the figures and a self-contained ``index.html``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from typing import Any
+
+from motor_comp.errors import ParameterError
+
+
+_POLICY = ('Input handling: messages are aligned onto the /axis/joint_states stamps '
+           '(latest value at or before each); out-of-order stamps are sorted and duplicate '
+           'stamps keep the last message; NaN/Inf samples are dropped; a truncated or '
+           'damaged file is read up to the damage. Each case prints a warning on stderr.')
+
+
+def _positive(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f'must be a finite number > 0, got {text!r}')
+    return v
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``analyze`` subcommand."""
+    p = subparsers.add_parser(
+        'analyze', help='tracking error and quadrant glitches of recorded runs',
+        description=__doc__.splitlines()[0], epilog=_POLICY)
+    p.add_argument('runs', nargs='+', metavar='RUN.mcap', help='MCAP runs (first = baseline)')
+    p.add_argument('--glitch-window', type=_positive, default=0.2, metavar='S',
+                   help='window W after each reference reversal [s] (default 0.2)')
+    p.add_argument('--settle-band', type=_positive, default=None, metavar='M',
+                   help='absolute settling band for point-to-point moves [m] '
+                        '(default 2%% of the move)')
+    p.add_argument('--chatter-cutoff', type=_positive, default=100.0, metavar='HZ',
+                   help='voltage content above this frequency counts as chattering [Hz]')
+    p.add_argument('--namespace', default='axis', help='topic namespace (default axis)')
+    p.add_argument('--json', action='store_true', help='print one JSON object on stdout')
+    p.add_argument('--report', metavar='DIR', help='write figures and index.html here')
+    p.add_argument('--progress', action='store_true',
+                   help='show reading progress on stderr (default: only on a terminal)')
+    p.set_defaults(func=run)
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    return x
+
+
+def run(args: argparse.Namespace) -> int:
+    """Analyse the runs; return the exit status."""
+    from motor_comp.analysis.metrics import compute_metrics
+    from motor_comp.analysis.report import format_table, relative_change, write_report
+    from motor_comp.logs import read_run
+
+    progress = bool(args.progress or sys.stderr.isatty())
+    runs, metrics = [], []
+    for path in args.runs:
+        r = read_run(path, progress=progress, namespace=args.namespace)
+        runs.append(r)
+        try:
+            metrics.append(compute_metrics(r, glitch_window=args.glitch_window,
+                                           settle_band=args.settle_band,
+                                           chatter_cutoff=args.chatter_cutoff))
+        except ParameterError as exc:
+            raise ParameterError(f'{path}: {exc}') from None
+    report = None
+    if args.report:
+        try:
+            report = write_report(args.report, runs, metrics, sources=args.runs)
+        except OSError as exc:
+            raise ParameterError(f'--report {args.report}: cannot write '
+                                 f'({exc.strerror or exc})') from None
+    if args.json:
+        entries = []
+        for path, m in zip(args.runs, metrics):
+            d = m.as_dict()
+            d['path'] = str(path)
+            d['relative_to_first'] = relative_change(metrics[0], m)
+            entries.append(d)
+        out = {'runs': entries, 'glitch_window': args.glitch_window}
+        if report is not None:
+            out['report'] = str(report)
+        print(json.dumps(_jsonable(out), allow_nan=False))
+    else:
+        print(format_table(metrics))
+        if report is not None:
+            print(f'report: {report}')
+    return 0

@@ -1,0 +1,92 @@
+"""``motor-comp compare RUN --model MODEL.yaml``: how well a model explains a measured run.
+
+Force residual of the inverse model (NRMSE, fit %), k-step-ahead position prediction
+with the measured input (µm), closed-loop replay when the run names its controller;
+``--report DIR`` writes the residual views (PNG) and an HTML page; ``--json`` prints one
+object ``{force_nrmse, force_fit_percent, prediction: {…}, replay, whiteness, model}``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from typing import Any
+
+
+def positive_float(text: str) -> float:
+    """Argparse type: a finite number > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f'must be a finite number > 0, got {text!r}')
+    return v
+
+
+def add_common(p: argparse.ArgumentParser) -> None:
+    """Arguments shared by compare, diagnose and fit."""
+    p.add_argument('run', metavar='RUN.mcap', help='measured run (MCAP; import CSV/MAT first)')
+    p.add_argument('--model', required=True, metavar='MODEL.yaml', help='model file')
+    p.add_argument('--json', action='store_true', help='print one JSON object to stdout')
+    p.add_argument('--window', type=positive_float, default=0.02, metavar='S',
+                   help='zero-phase derivative window [s] (default 0.02)')
+    p.add_argument('--input-hold', choices=('zoh', 'sample'), default=None,
+                   help='logged input is a held command (zoh, default for voltage) or a '
+                        'sampled measurement (sample, default for current/force)')
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``compare`` subcommand."""
+    p = subparsers.add_parser('compare', help='compare a model with a measured run',
+                              description=__doc__.splitlines()[0])
+    add_common(p)
+    p.add_argument('--report', metavar='DIR', help='write PNG figures and index.html here')
+    p.add_argument('--horizon', type=positive_float, default=0.02, metavar='S',
+                   help='position prediction horizon [s] (default 0.02)')
+    p.set_defaults(func=run)
+
+
+def emit(args: argparse.Namespace, data: dict[str, Any], text: str) -> None:
+    """JSON on stdout with --json, else the text."""
+    if args.json:
+        json.dump(data, sys.stdout, allow_nan=False, default=float)
+        sys.stdout.write('\n')
+    else:
+        print(text)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``compare``."""
+    from motor_comp.workbench import compare, open_session
+    from motor_comp.workbench import report as rep
+    s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold)
+    cmp = compare(s.run, s.kin, s.model, horizon=args.horizon)
+    white = rep.whiteness(s.kin, cmp.residual)
+    text = cmp.summary() + (f'\nwhiteness: {100 * white.auto_outside:.0f} % of '
+                            f'autocorrelation lags outside the 99 % band, '
+                            f'{100 * white.cross_outside:.0f} % of input cross-correlation')
+    data = cmp.as_dict()
+    data['whiteness'] = white.as_dict()
+    if args.report:
+        out = rep.prepare_dir(args.report)
+        figs = rep.residual_figures(out, s.kin, cmp.residual)
+        figs.append(rep.prediction_figure(out, s.kin, cmp.prediction))
+        page = rep.write_html(out, f'compare: {s.kin.name} vs {args.model}', text, figs)
+        data['report'] = str(page)
+    emit(args, _finite(data), text)
+    if args.report:
+        print(f'report: {data["report"]}', file=sys.stderr)
+    return 0
+
+
+def _finite(obj: Any) -> Any:
+    """Replace non-finite floats by None (JSON has no NaN)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj

@@ -1,0 +1,64 @@
+"""``motor-comp diagnose RUN --model MODEL.yaml``: which physical effect is the model missing?
+
+Every effect of the vocabulary not in the model (and a mass refit) is fitted to the
+force residual and ranked by the fraction of it removed on held-out time blocks;
+prints the finding in plain words; ``--json`` prints ``{baseline: {force_nrmse, …},
+candidates: [{effect, explained, force_nrmse, params, uncertainty, supported, …}]}``
+(DESIGN.md §6), best first; ``--report DIR`` adds the residual views.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from motor_comp.cli.compare import _finite, add_common, emit, positive_float
+
+
+def fraction(text: str) -> float:
+    """Argparse type: a number in [0, 1)."""
+    v = positive_float(text) if text.strip() not in ('0', '0.0') else 0.0
+    if v >= 1:
+        raise argparse.ArgumentTypeError(f'must be in [0, 1), got {text!r}')
+    return v
+
+
+def add_diagnose_options(p: argparse.ArgumentParser) -> None:
+    """Options shared with ``fit --auto``."""
+    p.add_argument('--folds', type=int, default=5, choices=range(2, 21), metavar='K',
+                   help='held-out time blocks (default 5)')
+    p.add_argument('--min-gain', type=fraction, default=0.1, metavar='F',
+                   help='least held-out fraction of the residual a supported effect '
+                        'removes (default 0.1)')
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``diagnose`` subcommand."""
+    p = subparsers.add_parser('diagnose', help='find the physical effect a model is missing',
+                              description=__doc__.splitlines()[0])
+    add_common(p)
+    add_diagnose_options(p)
+    p.add_argument('--report', metavar='DIR', help='write PNG figures and index.html here')
+    p.add_argument('--rotary', action='store_true',
+                   help='the position is an angle [rad]: give periods in cycles/rev too')
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``diagnose``."""
+    from motor_comp.workbench import diagnose, open_session
+    from motor_comp.workbench import report as rep
+    s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold)
+    d = diagnose(s.kin, s.model, folds=args.folds, min_gain=args.min_gain,
+                 rotary=args.rotary)
+    text = d.summary()
+    data = d.as_dict()
+    if args.report:
+        out = rep.prepare_dir(args.report)
+        figs = rep.residual_figures(out, s.kin, d.residual)
+        figs.insert(0, rep.candidates_figure(out, d.candidates))
+        page = rep.write_html(out, f'diagnose: {s.kin.name} with {args.model}', text, figs)
+        data['report'] = str(page)
+    emit(args, _finite(data), text)
+    if args.report:
+        print(f'report: {data["report"]}', file=sys.stderr)
+    return 0

@@ -1,0 +1,69 @@
+"""``motor-comp fit RUN --model MODEL.yaml --add EFFECT -o NEW.yaml``: add effects, refit.
+
+``--add`` names effects of the vocabulary (repeatable, in order); ``--auto`` repeats
+diagnose → add until no candidate pays for its parameters, printing each step.  All
+parameters that enter linearly (mass, friction levels, ripple amplitudes, …) are refit
+jointly.  Prints the force error before/after (held-out) and the position prediction
+error; writes the model file with ``-o``; ``--json`` prints
+``{steps: [{effect, force_nrmse}], model: {…}, position: {before, after}}``.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from motor_comp.cli.compare import _finite, add_common, emit
+from motor_comp.cli.diagnose import add_diagnose_options
+from motor_comp.errors import MotorCompError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``fit`` subcommand."""
+    from motor_comp.physics.effects import VOCABULARY
+    p = subparsers.add_parser('fit', help='add effects to a model and refit it on a run',
+                              description=__doc__.splitlines()[0])
+    add_common(p)
+    add_diagnose_options(p)
+    p.add_argument('--add', action='append', default=[], metavar='EFFECT',
+                   choices=list(VOCABULARY) + ['mass'],
+                   help=f'effect to add ({", ".join(VOCABULARY)}; or mass), repeatable')
+    p.add_argument('--auto', action='store_true',
+                   help='repeat diagnose -> add until nothing pays for its parameters')
+    p.add_argument('-o', '--output', metavar='NEW.yaml', help='write the fitted model here')
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``fit``."""
+    from motor_comp.workbench import fit, open_session, predict
+    if args.output and Path(args.output).is_dir():
+        raise MotorCompError(f'{args.output}: is a directory, expected a model file name')
+    s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold)
+    say = None if args.json else print
+    if args.json:
+        def say(msg: str) -> None:
+            print(msg, file=sys.stderr)
+    result = fit(s.kin, s.model, add=args.add, auto=args.auto, folds=args.folds,
+                 min_gain=args.min_gain, progress=say)
+    before = predict(s.kin, s.model)
+    after = predict(s.kin, result.model)
+    first, last = result.steps[0], result.steps[-1]
+    lines = [f'force NRMSE: before {100 * first.force_nrmse:.1f} %, after '
+             f'{100 * last.force_nrmse:.1f} % (held-out)',
+             f'position, {1e3 * before.horizon:.0f} ms-ahead prediction RMS error: before '
+             f'{1e6 * before.rms_error:.2f} µm, after {1e6 * after.rms_error:.2f} µm']
+    if args.output:
+        try:
+            result.model.save(args.output)
+        except OSError as exc:
+            raise MotorCompError(f'{args.output}: cannot write model ({exc.strerror})') \
+                from None
+        lines.append(f'model written to {args.output}')
+    data = result.as_dict()
+    data['position'] = {'horizon': before.horizon, 'before': before.rms_error,
+                        'after': after.rms_error}
+    if args.output:
+        data['output'] = str(args.output)
+    emit(args, _finite(data), '\n'.join(lines))
+    return 0

@@ -1,0 +1,155 @@
+"""``motor-comp replay``: publish a recorded run's topics with their recorded timing.
+
+Every channel of the MCAP whose message type is importable here (the DESIGN.md §5
+types, or any installed ROS message package) is published under its recorded topic
+name, as the recorded CDR bytes (no decode/encode), paced by the recorded log times
+divided by ``--rate``.  Sim time goes out on ``/clock``: the recorded ``/clock`` if the
+file has one, else one Clock per distinct log time.  So a controller node, a
+monitoring node or a live plotter (``use_sim_time:=true``) consumes a past run as if it
+were live.  Ctrl-C stops cleanly.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any, Iterator
+
+from motor_comp.errors import InputFileError, ParameterError
+
+
+def _message_class(type_name: str) -> Any | None:
+    """Return the rclpy message class of ``pkg/msg/Type`` (None if not installed)."""
+    parts = type_name.split('/')
+    if len(parts) == 2:
+        parts = [parts[0], 'msg', parts[1]]
+    if len(parts) != 3:
+        return None
+    try:
+        return getattr(importlib.import_module(f'{parts[0]}.{parts[1]}'), parts[2])
+    except (ImportError, AttributeError):
+        return None
+
+
+def _messages(path: Path) -> Iterator[tuple[str, str, int, bytes]]:
+    """(topic, type, log_time_ns, cdr) in log-time order; one-line errors."""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+    try:
+        with open(path, 'rb') as f:
+            reader = make_reader(f)
+            for schema, channel, message in reader.iter_messages(log_time_order=True):
+                if channel.message_encoding != 'cdr' or schema is None:
+                    continue
+                yield channel.topic, schema.name, message.log_time, message.data
+    except FileNotFoundError:
+        raise InputFileError(f'{path}: no such file') from None
+    except (McapError, ValueError, EOFError, OSError) as exc:
+        raise InputFileError(f'{path}: cannot replay ({type(exc).__name__}: {exc}); try '
+                             f'`motor-comp analyze` to read what is recoverable') from None
+
+
+def replay(path: Path, *, rate: float = 1.0, wait_for_subscribers: int = 0,
+           startup_delay: float = 1.0, timeout: float = 30.0) -> dict[str, int]:
+    """Publish ``path``'s topics at ``rate`` × recorded speed; counts per topic.
+
+    ``rate`` 0 publishes as fast as possible.  Before the first message, waits until
+    ``wait_for_subscribers`` readers have matched any replayed topic (at most
+    ``timeout`` s) and then ``startup_delay`` s, so DDS discovery completes.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(f'{path}: no such file')
+    if not (rate >= 0.0 and rate < float('inf')):
+        raise ParameterError(f'--rate must be >= 0, got {rate:g}')
+    # pre-scan: the channels to publish (and a corrupt file fails before any publish)
+    types: dict[str, str] = {}
+    for topic, type_name, _, _ in _messages(path):
+        types.setdefault(topic, type_name)
+    if not types:
+        raise InputFileError(f'{path}: no CDR messages to replay')
+
+    import rclpy
+    from rclpy.duration import Duration
+    from rosgraph_msgs.msg import Clock
+
+    from motor_comp.nodes.common import LOOP_QOS, set_stamp
+    rclpy.init(args=[])
+    node = rclpy.create_node('replay', namespace='/')
+    counts = {t: 0 for t in types}
+    try:
+        pubs = {}
+        for topic, type_name in types.items():
+            cls = _message_class(type_name)
+            if cls is None:
+                print(f'motor-comp replay: skipping {topic} ({type_name} not installed)',
+                      file=sys.stderr)
+                continue
+            pubs[topic] = node.create_publisher(cls, topic, LOOP_QOS)
+        synth_clock = '/clock' not in pubs
+        clock_pub = node.create_publisher(Clock, '/clock', LOOP_QOS) if synth_clock else None
+        deadline = time.monotonic() + timeout
+        while sum(p.get_subscription_count() for p in pubs.values()) < wait_for_subscribers:
+            if time.monotonic() > deadline:
+                raise InputFileError(f'replay: no {wait_for_subscribers} subscriber(s) '
+                                     f'matched within {timeout:g} s')
+            rclpy.spin_once(node, timeout_sec=0.05)
+        time.sleep(startup_delay)
+        clock = Clock()
+        t0_log = None
+        t0_wall = time.monotonic()
+        last_clock = None
+        for topic, _, log_ns, data in _messages(path):
+            pub = pubs.get(topic)
+            if pub is None:
+                continue
+            if t0_log is None:
+                t0_log = log_ns
+            if rate > 0:
+                delay = t0_wall + (log_ns - t0_log) * 1e-9 / rate - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+            if synth_clock and log_ns != last_clock:
+                set_stamp(clock.clock, log_ns)
+                clock_pub.publish(clock)
+                last_clock = log_ns
+            pub.publish(data)   # the recorded CDR bytes, unchanged
+            counts[topic] += 1
+        for pub in pubs.values():   # let reliable readers receive the tail
+            pub.wait_for_all_acked(Duration(seconds=2.0))
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return counts
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``replay`` subcommand."""
+    p = subparsers.add_parser('replay', help='publish a recorded run with its timing',
+                              description=__doc__.splitlines()[0])
+    p.add_argument('run', type=Path, help='RUN.mcap')
+    p.add_argument('--rate', type=float, default=1.0,
+                   help='speed factor (default 1 = recorded speed; 0 = as fast as possible)')
+    p.add_argument('--wait-for-subscribers', type=int, default=0, metavar='N',
+                   help='wait until N readers matched before publishing (default 0)')
+    p.add_argument('--startup-delay', type=float, default=1.0,
+                   help='seconds for DDS discovery before the first message (default 1)')
+    p.add_argument('--json', action='store_true', help='print the counts as one JSON object')
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``motor-comp replay``."""
+    if args.startup_delay < 0 or args.wait_for_subscribers < 0:
+        raise ParameterError('--startup-delay and --wait-for-subscribers must be >= 0')
+    counts = replay(args.run, rate=args.rate, wait_for_subscribers=args.wait_for_subscribers,
+                    startup_delay=args.startup_delay)
+    if args.json:
+        print(json.dumps({'run': str(args.run), 'published': counts}))
+    else:
+        for topic, n in counts.items():
+            print(f'{topic:<28} {n:>8} messages')
+    return 0

@@ -1,0 +1,314 @@
+"""``motor-comp run``: the four ROS 2 nodes as separate processes, one recorded run.
+
+No ``ros2 launch`` needed (the PyPI ROS wheels have no launch): this module starts
+``recorder_node``, ``controller_node``, ``trajectory_node`` and ``plant_node`` with
+``python -m motor_comp.nodes.<name> --ros-args --params-file <generated yaml>``, waits
+for the plant to finish ``--duration`` of sim time, stops the others with SIGINT (the
+recorder finalises its MCAP), and prints the metrics of the recorded file.
+
+:class:`NodeGroup` (process start, wait, clean stop — also on errors) is shared with
+``motor-comp demo`` and the node tests.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import itertools
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import yaml
+
+from motor_comp.errors import InputFileError, MotorCompError, ParameterError
+
+NODES = ('recorder_node', 'controller_node', 'trajectory_node', 'plant_node')
+MODES = ('pid', 'adaptive_sliding', 'npid')
+FEEDFORWARDS = ('none', 'static', 'gms', 'static+gms')
+_counter = itertools.count()
+
+
+class NodeProcessError(MotorCompError):
+    """A node process failed (bad parameter, crash, timeout)."""
+
+
+def private_domain_id() -> int:
+    """Pick a ROS_DOMAIN_ID in 1..101 derived from the pid and a counter (parallel runs differ)."""
+    return 1 + (os.getpid() * 7 + next(_counter)) % 101
+
+
+def ros_environment(domain_id: int | None = None) -> dict[str, str]:
+    """Return the environment for node processes: localhost-only DDS, a chosen domain."""
+    env = dict(os.environ)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = env.get('ROS_AUTOMATIC_DISCOVERY_RANGE',
+                                                   'LOCALHOST')
+    env.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+    if domain_id is not None:
+        env['ROS_DOMAIN_ID'] = str(domain_id)
+    elif 'ROS_DOMAIN_ID' not in env:
+        env['ROS_DOMAIN_ID'] = str(private_domain_id())
+    env['PYTHONUNBUFFERED'] = '1'
+    return env
+
+
+def write_params_file(path: Path, params: Mapping[str, Mapping[str, Any]],
+                      namespace: str = 'axis') -> Path:
+    """Write ``{node: {param: value}}`` as a ROS 2 params file (``/ns/node`` keys)."""
+    data = {f'/{namespace}/{node}': {'ros__parameters': dict(values)}
+            for node, values in params.items()}
+    path.write_text(yaml.safe_dump(data, sort_keys=False), encoding='utf-8')
+    return path
+
+
+@dataclasses.dataclass
+class NodeProcess:
+    """One node process and its log file."""
+
+    name: str
+    popen: subprocess.Popen
+    log: Path
+
+    def tail(self, n: int = 3) -> str:
+        """Return the last ``n`` non-empty lines of the node's output (for error messages)."""
+        try:
+            lines = [ln for ln in self.log.read_text(errors='replace').splitlines()
+                     if ln.strip()]
+        except OSError:
+            return ''
+        return ' | '.join(lines[-n:])
+
+
+class NodeGroup:
+    """Start node processes, watch them, and always stop them (context manager).
+
+    Parameters
+    ----------
+    workdir : Path
+        Where the generated params file and the node logs go.
+    env : Mapping[str, str]
+        Environment of the processes (see :func:`ros_environment`).
+    """
+
+    def __init__(self, workdir: Path, env: Mapping[str, str]) -> None:
+        self.workdir = Path(workdir)
+        self.env = dict(env)
+        self.procs: dict[str, NodeProcess] = {}
+
+    def start(self, node: str, params_file: Path | None = None,
+              extra: Sequence[str] = ()) -> NodeProcess:
+        """Start ``python -m motor_comp.nodes.<node>`` with a params file and extra args."""
+        return self.start_as(node, node, params_file, extra)
+
+    def start_as(self, name: str, node: str, params_file: Path | None = None,
+                 extra: Sequence[str] = ()) -> NodeProcess:
+        """Start node module ``node`` under the label ``name`` (e.g. a second recorder)."""
+        log = self.workdir / f'{name}.log'
+        ros_args = ['--ros-args', '--log-level', 'info']
+        if params_file is not None:
+            ros_args += ['--params-file', str(params_file)]
+        cmd = [sys.executable, '-m', f'motor_comp.nodes.{node}', *ros_args, *extra]
+        with open(log, 'wb') as out:
+            popen = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=self.env,
+                                     stdin=subprocess.DEVNULL, start_new_session=True)
+        proc = NodeProcess(name, popen, log)
+        self.procs[name] = proc
+        return proc
+
+    def check_alive(self, *, except_: Sequence[str] = ()) -> None:
+        """Raise :class:`NodeProcessError` if a node (not in ``except_``) has exited."""
+        for name, proc in self.procs.items():
+            if name in except_:
+                continue
+            code = proc.popen.poll()
+            if code is not None:
+                raise NodeProcessError(f'{name} exited with status {code}: {proc.tail()}')
+
+    def wait(self, node: str, timeout: float, *, watch: bool = True) -> int:
+        """Wait for ``node`` to exit (others must stay alive if ``watch``); its status."""
+        proc = self.procs[node]
+        deadline = time.monotonic() + timeout
+        while True:
+            code = proc.popen.poll()
+            if code is not None:
+                return code
+            if watch:
+                self.check_alive(except_=(node,))
+            if time.monotonic() > deadline:
+                raise NodeProcessError(f'{node} did not finish within {timeout:g} s '
+                                       f'(last output: {proc.tail()})')
+            time.sleep(0.05)
+
+    def stop(self, node: str, *, sig: int = signal.SIGINT, timeout: float = 10.0) -> int:
+        """Signal ``node`` and wait for it to exit (SIGKILL after ``timeout``)."""
+        popen = self.procs[node].popen
+        if popen.poll() is None:
+            try:
+                popen.send_signal(sig)
+                return popen.wait(timeout)
+            except subprocess.TimeoutExpired:
+                popen.kill()
+        return popen.wait()
+
+    def stop_all(self, order: Sequence[str] | None = None) -> dict[str, int]:
+        """Stop every node (in ``order``, then the rest); their exit statuses."""
+        names = list(order or ()) + [n for n in self.procs if n not in (order or ())]
+        return {n: self.stop(n) for n in names if n in self.procs}
+
+    def __enter__(self) -> 'NodeGroup':
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        # stop the loop's drivers first so the recorder sees a quiet graph when it drains
+        self.stop_all(['plant_node', 'trajectory_node', 'controller_node', 'recorder_node'])
+
+
+@dataclasses.dataclass(frozen=True)
+class RunSpec:
+    """Everything that defines one run of the four nodes."""
+
+    output: Path
+    plant: str = 'pmlm'
+    controller: str = 'pid'
+    feedforward: str = 'none'
+    trajectory: str = ''
+    timing: str = 'lockstep'
+    duration: float = 2.0
+    control_rate: float = 1000.0
+    seed: int = 0
+    extra_params: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
+
+    def node_params(self) -> dict[str, dict[str, Any]]:
+        """Return the parameters of each node for this run."""
+        from motor_comp.control.trajectories import make_trajectory
+        traj = self.trajectory or ('p2p' if self.plant == 'pmlm' else 'sine')
+        # the plant starts at rest on the reference, as the in-process simulator does
+        x0 = make_trajectory(traj).at(0.0).position
+        common = {'timing': self.timing, 'control_rate': float(self.control_rate)}
+        params = {
+            'plant_node': {**common, 'plant': self.plant, 'duration': float(self.duration),
+                           'seed': int(self.seed), 'x0': float(x0),
+                           # joint_states readers: controller, recorder (+ the realtime
+                           # trajectory, which takes its time origin from it)
+                           'expected_subscribers': 3 if self.timing == 'realtime' else 2},
+            'trajectory_node': {**common, 'trajectory': traj},
+            'controller_node': {**common, 'plant': self.plant, 'mode': self.controller,
+                                'feedforward': self.feedforward},
+            'recorder_node': {'output': str(self.output), 'timing': self.timing},
+        }
+        for node, values in self.extra_params.items():
+            params.setdefault(node, {}).update(values)
+        return params
+
+
+def run_nodes(spec: RunSpec, *, workdir: Path | None = None, timeout: float | None = None,
+              domain_id: int | None = None, progress: bool = True) -> Path:
+    """Run the four nodes for ``spec`` and return the recorded MCAP path.
+
+    Raises :class:`NodeProcessError` (one line, with the failing node's last output)
+    if a node exits early or the run does not finish within ``timeout`` seconds.
+    """
+    out = Path(spec.output)
+    if not out.parent.is_dir():
+        raise InputFileError(f'{out}: output directory {out.parent} does not exist')
+    if timeout is None:
+        timeout = 60.0 + 20.0 * spec.duration
+    with tempfile.TemporaryDirectory(prefix='motor_comp_run_') as tmp:
+        work = Path(workdir or tmp)
+        params_file = write_params_file(work / 'params.yaml', spec.node_params())
+        env = ros_environment(domain_id)
+        t0 = time.monotonic()
+        with NodeGroup(work, env) as group:
+            for node in NODES:
+                group.start(node, params_file)
+            if progress:
+                print(f'motor-comp run: {spec.plant}/{spec.controller}/{spec.feedforward} '
+                      f'{spec.timing} {spec.duration:g} s (ROS_DOMAIN_ID '
+                      f'{env["ROS_DOMAIN_ID"]}) …', file=sys.stderr)
+            code = group.wait('plant_node', timeout)
+            if code != 0:
+                raise NodeProcessError(f'plant_node exited with status {code}: '
+                                       f'{group.procs["plant_node"].tail()}')
+            statuses = group.stop_all(['trajectory_node', 'controller_node',
+                                       'recorder_node'])
+            if statuses.get('recorder_node', 0) != 0:
+                raise NodeProcessError(f'recorder_node exited with status '
+                                       f'{statuses["recorder_node"]}: '
+                                       f'{group.procs["recorder_node"].tail()}')
+        if progress:
+            print(f'motor-comp run: done in {time.monotonic() - t0:.1f} s wall → {out}',
+                  file=sys.stderr)
+    return out
+
+
+def metrics_row(path: Path) -> dict[str, Any]:
+    """Read a recorded run and compute its metrics (DESIGN.md §6 keys) plus its name."""
+    from motor_comp.analysis.metrics import compute_metrics
+    from motor_comp.logs import read_run
+    run = read_run(path)
+    row = {'name': run.name, 'path': str(path)}
+    row.update(compute_metrics(run).as_dict())
+    return row
+
+
+def print_table(rows: Sequence[Mapping[str, Any]], *, label: str = 'run') -> None:
+    """Print a fixed-width metrics table in micrometres."""
+    head = f'{label:<28} {"rms_error":>11} {"max_error":>11} {"max_glitch":>11} ' \
+           f'{"mean_glitch":>11}'
+    print(head + '\n' + '-' * len(head))
+    for r in rows:
+        print(f'{str(r.get(label, r.get("name"))):<28} {r["rms_error"] * 1e6:>8.3f} µm '
+              f'{r["max_error"] * 1e6:>8.3f} µm {r["max_glitch"] * 1e6:>8.3f} µm '
+              f'{r["mean_glitch"] * 1e6:>8.3f} µm')
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``run`` subcommand."""
+    p = subparsers.add_parser('run', help='run the four ROS 2 nodes as processes, record MCAP',
+                              description=__doc__.splitlines()[0])
+    p.add_argument('--plant', default='pmlm',
+                   help='pmlm, ballscrew or a plant YAML file (default pmlm)')
+    p.add_argument('--controller', choices=MODES, default='pid')
+    p.add_argument('--feedforward', choices=FEEDFORWARDS, default='none')
+    p.add_argument('--trajectory', choices=('sine', 'p2p', 'cv', 'chirp'), default='',
+                   help='default: p2p on the PMLM, sine on the ball-screw')
+    p.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep',
+                   help='timing mode (default lockstep)')
+    p.add_argument('--duration', type=float, default=2.0, help='sim time [s] (default 2)')
+    p.add_argument('--rate', type=float, default=1000.0, help='control rate [Hz]')
+    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--timeout', type=float, default=None,
+                   help='wall-time limit [s] (default 60 + 20·duration)')
+    p.add_argument('--domain-id', type=int, default=None,
+                   help='ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID or a private one)')
+    p.add_argument('-o', '--output', required=True, type=Path, help='RUN.mcap to write')
+    p.add_argument('--json', action='store_true', help='print one JSON object')
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``motor-comp run``."""
+    if not args.duration > 0:
+        raise ParameterError(f'--duration must be > 0, got {args.duration:g}')
+    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
+        raise ParameterError(f'--domain-id must be in 0..232, got {args.domain_id}')
+    from motor_comp.physics.config import load_plant
+    load_plant(args.plant)   # a bad plant name/file is a one-line error before any process
+    spec = RunSpec(output=args.output, plant=args.plant, controller=args.controller,
+                   feedforward=args.feedforward, trajectory=args.trajectory,
+                   timing=args.mode, duration=args.duration, control_rate=args.rate,
+                   seed=args.seed)
+    path = run_nodes(spec, timeout=args.timeout, domain_id=args.domain_id)
+    row = metrics_row(path)
+    row.update(plant=args.plant, controller=args.controller, feedforward=args.feedforward,
+               mode=args.mode)
+    if args.json:
+        print(json.dumps({'runs': [row]}))
+    else:
+        print_table([row], label='name')
+    return 0

@@ -1,0 +1,373 @@
+"""The controller: one compiled step for every mode, wrapped for Python drivers.
+
+:func:`controller_step` (njit) is the single implementation of the control laws; the
+in-process simulator calls it inside its compiled loop and :meth:`Controller.step`
+calls it from Python (the ROS ``controller_node``), on the same packed parameter vector
+``Q`` and state vector ``C``, so both drivers produce bit-identical commands.
+
+Per step, at control period ``T`` (``e = r − y`` [m]):
+
+1. ``ė_f`` ← filtered ``ṙ − v_meas``; ``I ← I + T·e``;
+2. feedback by mode — PID ``Kp·e + Ki·I + Kd·ė_f``; N-PID ``k(e)·(…)`` (Chiew eq. 8);
+   adaptive sliding ``K·s + θ̂ᵀY + k̂·sat(s/φ)`` with its update laws (Tan eq. 15–24);
+3. friction feedforward from the reference (Chiew Fig. 9), force / nominal input gain;
+4. saturation ±u_max; conditional-integration anti-windup.
+"""
+from __future__ import annotations
+
+import enum
+import math
+from typing import Any, Mapping
+
+import numpy as np
+from numba import njit
+
+from motor_comp.control._jitcache import JIT_OPTIONS
+from motor_comp.control.adaptive_sliding import ESTIMATES, N_THETA, AdaptiveParams, \
+    adaptive_output, estimates_in_units, nominal_theta, projection_box
+from motor_comp.control.feedforward import Feedforward, friction_feedforward
+from motor_comp.control.npid import NPIDParams, npid_gain, popov_limit, sampled_loop
+from motor_comp.control.params import ParamsBase
+from motor_comp.control.pid import PIDParams, filter_derivative, pid_output
+from motor_comp.errors import ParameterError, check_positive
+from motor_comp.physics.config import PlantConfig, PlantKind
+from motor_comp.physics.effects.presliding import MAX_ELEMENTS
+
+
+class ControlMode(enum.IntEnum):
+    """Controller mode (ROS parameter ``mode``)."""
+
+    PID = 0
+    ADAPTIVE_SLIDING = 1
+    NPID = 2
+
+    @property
+    def label(self) -> str:
+        """The CLI/ROS spelling."""
+        return self.name.lower()
+
+    @classmethod
+    def parse(cls, value: 'str | ControlMode') -> 'ControlMode':
+        """From ``pid | adaptive_sliding | npid``."""
+        if isinstance(value, ControlMode):
+            return value
+        try:
+            return cls[str(value).upper()]
+        except KeyError:
+            raise ParameterError(f'controller mode must be one of '
+                                 f'{", ".join(m.label for m in cls)}, got {value!r}') from None
+
+
+PARAMS: dict[ControlMode, type[ParamsBase]] = {
+    ControlMode.PID: PIDParams, ControlMode.ADAPTIVE_SLIDING: AdaptiveParams,
+    ControlMode.NPID: NPIDParams}
+
+# ---- packed parameters Q ------------------------------------------------------------
+Q_MODE, Q_FF, Q_KP, Q_KI, Q_KD, Q_TF, Q_UMAX = 0, 1, 2, 3, 4, 5, 6
+Q_K0, Q_EMAX, Q_KMAX = 7, 8, 9
+Q_LAM1, Q_LAM2, Q_PHI, Q_KS, Q_OMEGA, Q_ADAPT = 10, 11, 12, 13, 14, 15
+Q_GAMMA = 16
+Q_LO = Q_GAMMA + N_THETA
+Q_HI = Q_LO + N_THETA
+Q_GAIN = Q_HI + N_THETA
+Q_FC, Q_FS, Q_VS, Q_DELTA, Q_FV = Q_GAIN + 1, Q_GAIN + 2, Q_GAIN + 3, Q_GAIN + 4, Q_GAIN + 5
+Q_GMS_N, Q_GMS_C = Q_GAIN + 6, Q_GAIN + 7
+Q_GMS_ALPHA = Q_GAIN + 8
+Q_GMS_K = Q_GMS_ALPHA + MAX_ELEMENTS
+Q_SIZE = Q_GMS_K + MAX_ELEMENTS
+
+# ---- state C --------------------------------------------------------------------------
+C_I, C_ED, C_E, C_U, C_UFF, C_INIT, C_RPREV, C_S = 0, 1, 2, 3, 4, 5, 6, 7
+C_RAL, C_YL = 8, 12  # last reference acceleration [m/s²] and measurement [m]
+C_FSTAT, C_FGMS = 9, 10   # last static-model and GMS-element feedforward forces [N]
+C_RVL = 11           # last reference velocity [m/s]
+C_DTL = 13           # last control period [s]
+C_TH = 14
+C_GMS_F = C_TH + N_THETA
+C_GMS_SLIP = C_GMS_F + MAX_ELEMENTS
+C_SIZE = C_GMS_SLIP + MAX_ELEMENTS
+
+
+@njit(**JIT_OPTIONS)
+def feedback(Q, th, e, ed, integ, ra, rv, y, dt, adapt):
+    """Feedback command [V] of the mode in ``Q`` and the sliding variable ``s`` [m/s].
+
+    ``th`` (adaptive estimates) is updated in place when ``adapt`` is true.
+    """
+    mode = int(Q[Q_MODE])
+    if mode == 1:
+        return adaptive_output(th, Q[Q_GAMMA:Q_GAMMA + 7], Q[Q_LO:Q_LO + 7],
+                               Q[Q_HI:Q_HI + 7], Q[Q_KS], Q[Q_LAM1], Q[Q_LAM2], Q[Q_PHI],
+                               Q[Q_OMEGA], Q[Q_TF], e, ed, integ, ra, rv, y, dt, adapt)
+    if mode == 2:
+        k = npid_gain(e, Q[Q_K0], Q[Q_EMAX], Q[Q_KMAX])
+        return k * pid_output(Q[Q_KP], Q[Q_KI], Q[Q_KD], e, integ, ed), 0.0
+    return pid_output(Q[Q_KP], Q[Q_KI], Q[Q_KD], e, integ, ed), 0.0
+
+
+@njit(**JIT_OPTIONS)
+def controller_step(Q, C, r, rv, ra, y, vy, dt):
+    """One control step: command [V] from reference (r, ṙ, r̈) and measurement (y, v).
+
+    Parameters
+    ----------
+    Q : ndarray
+        Packed parameters (module constants ``Q_*``).
+    C : ndarray
+        Controller state, updated in place.
+    r, rv, ra : float
+        Reference position [m], velocity [m/s], acceleration [m/s²].
+    y, vy : float
+        Measured position [m] and velocity [m/s].
+    dt : float
+        Control period [s].
+    """
+    e = r - y
+    ed = filter_derivative(C[C_ED], rv - vy, Q[Q_TF], dt)
+    integ = C[C_I] + dt * e
+    # friction feedforward (GMS elements stepped every period so switching is bumpless)
+    n = int(Q[Q_GMS_N])
+    if C[C_INIT] == 0.0:
+        C[C_INIT] = 1.0
+        C[C_RPREV] = r
+    dx = r - C[C_RPREV]
+    C[C_RPREV] = r
+    C[C_RVL] = rv
+    f_ff, f_static, f_gms = friction_feedforward(
+        int(Q[Q_FF]), rv, dx, dt, Q[Q_FC], Q[Q_FS], Q[Q_VS], Q[Q_DELTA], Q[Q_FV],
+        C[C_GMS_F:C_GMS_F + n], C[C_GMS_SLIP:C_GMS_SLIP + n],
+        Q[Q_GMS_ALPHA:Q_GMS_ALPHA + n], Q[Q_GMS_K:Q_GMS_K + n], Q[Q_GMS_C])
+    C[C_FSTAT] = f_static
+    C[C_FGMS] = f_gms
+    u_ff = f_ff / Q[Q_GAIN]
+    u_fb, s = feedback(Q, C[C_TH:C_TH + 7], e, ed, integ, ra, rv, y, dt, Q[Q_ADAPT] > 0.5)
+    C[C_S] = s
+    C[C_RAL] = ra
+    C[C_YL] = y
+    C[C_DTL] = dt
+    u = u_fb + u_ff
+    umax = Q[Q_UMAX]
+    u_sat = min(max(u, -umax), umax)
+    if u_sat != u and e * (u - u_sat) > 0.0:
+        integ = C[C_I]  # anti-windup: do not integrate further into the limit
+    C[C_I] = integ
+    C[C_ED] = ed
+    C[C_E] = e
+    C[C_U] = u_sat
+    C[C_UFF] = u_ff
+    return u_sat
+
+
+class Controller:
+    """A stateful controller: mode, feedforward, validated parameters, packed kernel data.
+
+    Build it with :func:`make_controller`.  ``step`` is what the ROS controller node
+    calls each period; :attr:`packed` / :attr:`state` are what the simulator's compiled
+    loop uses, so both run exactly the same arithmetic.
+    """
+
+    def __init__(self, plant: PlantConfig, mode: ControlMode, feedforward: Feedforward,
+                 params: Mapping[ControlMode, ParamsBase]) -> None:
+        self.plant = plant
+        self._mode = mode
+        self._ff = feedforward
+        self._params: dict[ControlMode, ParamsBase] = dict(params)
+        model = plant.model
+        self._gms = model.get('presliding')
+        if feedforward & Feedforward.GMS and self._gms is None:
+            raise ParameterError(f'feedforward {feedforward.label!r} needs a presliding '
+                                 f'(GMS) effect in the nominal model {plant.source!r}')
+        self.state = np.zeros(C_SIZE)
+        self.packed = np.zeros(Q_SIZE)
+        self._pack()
+        self.reset()
+
+    # -- packing ---------------------------------------------------------------------
+    def _pack(self) -> None:
+        Q = np.zeros(Q_SIZE)
+        model = self.plant.model
+        mode, p = self._mode, self._params[self._mode]
+        Q[Q_MODE] = float(mode)
+        Q[Q_FF] = float(self._ff)
+        Q[Q_UMAX] = p.u_max
+        Q[Q_TF] = p.tf
+        if mode is ControlMode.ADAPTIVE_SLIDING:
+            Q[Q_KP], Q[Q_KI], Q[Q_KD] = p.pid_gains
+            Q[Q_LAM1], Q[Q_LAM2], Q[Q_PHI], Q[Q_KS] = p.lambda1, p.lambda2, p.phi, p.k_s
+            theta, omega = nominal_theta(model, ripple_period=p.ripple_period)
+            Q[Q_OMEGA] = omega
+            Q[Q_ADAPT] = 1.0
+            Q[Q_GAMMA:Q_GAMMA + N_THETA] = (p.gamma_mass, p.gamma_back_emf, p.gamma_fc,
+                                            p.gamma_fv, p.gamma_ripple, p.gamma_ripple,
+                                            p.gamma_k)
+            lo, hi = projection_box(theta, p.bound_factor)
+            Q[Q_LO:Q_LO + N_THETA], Q[Q_HI:Q_HI + N_THETA] = lo, hi
+        else:
+            Q[Q_KP], Q[Q_KI], Q[Q_KD] = p.kp, p.ki, p.kd
+        if mode is ControlMode.NPID:
+            Q[Q_K0], Q[Q_EMAX] = p.k0, p.e_max
+            Q[Q_KMAX] = p.k_max if p.k_max > 0 else self.popov_limit()
+        Q[Q_GAIN] = model.input_gain
+        fc, fs, vs, delta = model.stribeck_curve_params()
+        Q[Q_FC], Q[Q_FS], Q[Q_VS], Q[Q_DELTA], Q[Q_FV] = fc, fs, vs, delta, model.fv
+        if self._gms is not None:
+            n = len(self._gms.alpha)
+            Q[Q_GMS_N], Q[Q_GMS_C] = n, self._gms.c
+            Q[Q_GMS_ALPHA:Q_GMS_ALPHA + n] = self._gms.alpha
+            Q[Q_GMS_K:Q_GMS_K + n] = self._gms.k
+        self.packed[:] = Q
+
+    def popov_limit(self) -> float:
+        """Popov bound of k(e) for the sampled loop of the nominal plant (Chiew eq. 9)."""
+        p = self._params.get(ControlMode.NPID, NPIDParams())
+        dly = self.plant.model.get('delay')
+        w, L = sampled_loop(self.plant.model, p, delay=dly.tau if dly else 0.0,
+                            control_period=1.0 / self.plant.control_rate)
+        return max(1.0, popov_limit(L, w))
+
+    # -- the step ------------------------------------------------------------------
+    def step(self, ref_pos: float, ref_vel: float, ref_acc: float, meas_pos: float,
+             meas_vel: float, dt: float) -> float:
+        """Command [V] for one control period ``dt`` [s] (same kernel as the simulator)."""
+        return float(controller_step(self.packed, self.state, float(ref_pos),
+                                     float(ref_vel), float(ref_acc), float(meas_pos),
+                                     float(meas_vel), float(dt)))
+
+    # -- run-time changes -----------------------------------------------------------
+    @property
+    def mode(self) -> ControlMode:
+        """Current mode."""
+        return self._mode
+
+    @property
+    def feedforward(self) -> Feedforward:
+        """Current friction feedforward."""
+        return self._ff
+
+    @property
+    def params(self) -> ParamsBase:
+        """Parameters of the current mode."""
+        return self._params[self._mode]
+
+    def params_of(self, mode: 'str | ControlMode') -> ParamsBase:
+        """Parameters of any mode (its defaults if it has not been used yet)."""
+        m = ControlMode.parse(mode)
+        return self._params.setdefault(m, default_params(m, self.plant))
+
+    def _rebalance(self, target: float) -> None:
+        """Set the integrator so that the last output would have been ``target`` [V].
+
+        The current law is evaluated at the last step's inputs (estimates frozen); it is
+        affine in the integral except for the adaptive ``sat(s/φ)``, so two secant steps
+        settle it.
+        """
+        Q, C = self.packed, self.state
+        coef = {ControlMode.PID: Q[Q_KI], ControlMode.NPID: Q[Q_KI],
+                ControlMode.ADAPTIVE_SLIDING: Q[Q_KS] * Q[Q_LAM2]}[self._mode]
+        if coef <= 0.0 or not math.isfinite(target):
+            return
+        for _ in range(2):
+            u_fb, _s = feedback(Q, C[C_TH:C_TH + N_THETA].copy(), C[C_E], C[C_ED], C[C_I],
+                                C[C_RAL], C[C_RVL], C[C_YL], C[C_DTL], False)
+            C[C_I] += (target - C[C_UFF] - u_fb) / coef
+
+    def set_mode(self, mode: 'str | ControlMode', *, keep_estimates: bool = True) -> None:
+        """Switch mode bumplessly: the integrator is re-balanced to the last output."""
+        mode = ControlMode.parse(mode)
+        if mode not in self._params:
+            self._params[mode] = default_params(mode, self.plant)
+        u_last, started = self.state[C_U], self.state[C_INIT] > 0
+        self._mode = mode
+        self._pack()
+        if not keep_estimates:
+            self._reset_estimates()
+        if started:
+            self._rebalance(u_last)
+
+    def set_feedforward(self, feedforward: 'str | Feedforward') -> None:
+        """Switch the friction feedforward bumplessly (the integrator absorbs the step)."""
+        ff = Feedforward.parse(feedforward)
+        if ff & Feedforward.GMS and self._gms is None:
+            raise ParameterError(f'feedforward {ff.label!r} needs a presliding (GMS) effect '
+                                 f'in the nominal model')
+        u_last, started = self.state[C_U], self.state[C_INIT] > 0
+        self._ff = ff
+        self._pack()
+        if started:
+            f = {Feedforward.NONE: 0.0, Feedforward.STATIC: self.state[C_FSTAT],
+                 Feedforward.GMS: self.state[C_FGMS],
+                 Feedforward.STATIC_GMS: self.state[C_FGMS]
+                 + self.plant.model.fv * self.state[C_RVL]}[ff]
+            self.state[C_UFF] = f / self.plant.model.input_gain
+            self._rebalance(u_last)
+
+    def update(self, *, mode: 'str | ControlMode | None' = None, **params: Any) -> None:
+        """Change parameters of ``mode`` (default: current), validated, all or nothing."""
+        m = self._mode if mode is None else ControlMode.parse(mode)
+        current = self._params.get(m) or default_params(m, self.plant)
+        new = current.replace(**params)  # raises ParameterError naming the field
+        self._params[m] = new
+        if m is self._mode:
+            try:
+                self._pack()
+            except Exception:
+                self._params[m] = current   # all or nothing
+                self._pack()
+                raise
+
+    @property
+    def estimates(self) -> dict[str, float]:
+        """Adaptive estimates in physical units (kg, V·s/m, N, N·s/m, N, N, N)."""
+        return estimates_in_units(self.state[C_TH:C_TH + N_THETA],
+                                  self.plant.model.input_gain)
+
+    @property
+    def nominal(self) -> dict[str, float]:
+        """Nominal (plant-config) values of :attr:`estimates`, same units."""
+        theta, _ = nominal_theta(self.plant.model)
+        return estimates_in_units(theta, self.plant.model.input_gain)
+
+    def _reset_estimates(self) -> None:
+        p = self._params.get(ControlMode.ADAPTIVE_SLIDING)
+        frac = p.initial_fraction if p is not None else 0.5
+        theta, _ = nominal_theta(self.plant.model,
+                                 ripple_period=p.ripple_period if p is not None else 0.0)
+        init = frac * theta
+        init[6] = 0.0  # the robust gain starts at zero and grows with |s_Δ|
+        self.state[C_TH:C_TH + N_THETA] = init
+
+    def reset(self) -> None:
+        """Back to the initial state (integrators, filters, feedforward, estimates)."""
+        self.state[:] = 0.0
+        self._reset_estimates()
+
+    def describe(self) -> dict[str, Any]:
+        """Mode, feedforward and parameters as plain values (run metadata)."""
+        return {'controller': self._mode.label, 'feedforward': self._ff.label,
+                **{k: v for k, v in self.params.as_dict().items()}}
+
+
+def default_params(mode: ControlMode, plant: PlantConfig) -> ParamsBase:
+    """Return the defaults of ``mode`` for ``plant``.
+
+    Ball-screw: PID and N-PID share the loop-shaping design of :mod:`.npid`.  PMLM: PID
+    and the N-PID base = the adaptive controller's PID part (Tan's fair baseline).
+    """
+    if mode is not ControlMode.ADAPTIVE_SLIDING and plant.kind is PlantKind.PMLM:
+        kp, ki, kd = AdaptiveParams().pid_gains
+        return PARAMS[mode]().replace(kp=kp, ki=ki, kd=kd, tf=AdaptiveParams().tf)
+    return PARAMS[mode]()
+
+
+def make_controller(mode: 'str | ControlMode', *, plant: PlantConfig,
+                    feedforward: 'str | Feedforward' = 'none', **params: Any) -> Controller:
+    """Build a controller for ``plant`` in ``mode`` with parameter overrides ``params``."""
+    m = ControlMode.parse(mode)
+    ff = Feedforward.parse(feedforward)
+    check_positive('control_rate [Hz]', plant.control_rate)
+    base = default_params(m, plant)
+    return Controller(plant, m, ff, {m: base.replace(**params)})
+
+
+__all__ = ['ControlMode', 'Controller', 'ESTIMATES', 'Feedforward', 'controller_step',
+           'default_params', 'make_controller']

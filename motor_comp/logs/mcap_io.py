@@ -1,0 +1,896 @@
+"""MCAP runs: canonical writer, crash-tolerant recorder, fast chunk-by-chunk reader.
+
+Files are MCAP with the ``ros2`` profile, ``ros2msg`` schemas (full definitions with
+dependencies, as rosbag2 writes them), CDR messages, rosbag2-style channel metadata
+(offered QoS, type hash) and the run parameters as an MCAP metadata record named
+``motor_comp``.  Topics are those of DESIGN.md §5 (namespace ``axis`` by default).
+
+Reading (:func:`read_run`) accepts any MCAP with those topics, whoever wrote it, and
+needs no ROS install.  Policies (documented contract of the reader):
+
+* **Time base.**  ``Run.t`` is the header stamp of ``/axis/joint_states`` [s]
+  (log times if the publisher left all stamps at zero).  ``/axis/reference`` uses its
+  header stamps; ``/axis/voltage`` (Float64, no header) its log time — shifted into the
+  stamp clock by the median ``stamp − log time`` of the joint states when the two
+  clocks are clearly different (> 1 s apart, e.g. sim-time stamps, wall-clock log).
+* **Alignment.**  Other topics are sampled and held onto ``t``: the latest value
+  stamped at or before each measurement.  Measurements before the first value of any
+  present topic are dropped, so every returned array is complete.
+* **Out-of-order or duplicate stamps** are sorted (stable) and de-duplicated keeping
+  the last message of a stamp, with a warning on stderr giving the counts.
+* **NaN/Inf samples** are dropped per signal with a warning giving the count; a topic
+  without any finite sample is treated as absent.
+* **Damage.**  Missing, empty, non-MCAP files raise :class:`InputFileError`.  A file
+  that is truncated, unfinalised (no footer, e.g. recorder killed) or corrupt part-way
+  is read record by record up to the damage; what was complete is returned, with a
+  warning stating where reading stopped and how many messages/what time span were
+  recovered.  If nothing usable precedes the damage, :class:`InputFileError`.
+"""
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import os
+import struct
+import time
+import zlib
+from pathlib import Path
+from typing import Any, Callable, Iterator, Mapping
+
+import numpy as np
+
+from motor_comp.errors import InputFileError, ParameterError
+from motor_comp.logs import cdr, schemas
+from motor_comp.logs.progress import Progress, warn
+from motor_comp.logs.run import Run
+
+MAGIC = b'\x89MCAP0\r\n'
+_MAX_CHUNK = 1 << 30
+#: name of the metadata record holding the run parameters
+METADATA_NAME = 'motor_comp'
+
+_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL = 0x01, 0x02, 0x03, 0x04
+_OP_MESSAGE, _OP_CHUNK, _OP_MESSAGE_INDEX = 0x05, 0x06, 0x07
+_OP_METADATA, _OP_DATA_END = 0x0C, 0x0F
+
+
+def _library() -> str:
+    from mcap.writer import LIBRARY_IDENTIFIER
+    return f'motor_comp/0.1.0 {LIBRARY_IDENTIFIER}'
+
+
+def _compression(name: str):
+    from mcap.writer import CompressionType
+    try:
+        return {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
+                'none': CompressionType.NONE, '': CompressionType.NONE}[name]
+    except KeyError:
+        raise ParameterError(f'compression must be zstd, lz4 or none, got {name!r}') from None
+
+
+class _Unbuffered:
+    """Write-through file for the mcap writer.
+
+    The mcap writer wraps raw files in a BufferedWriter; handing it this object (not a
+    RawIOBase) makes every finished chunk reach the OS at once, so a recorder killed
+    with SIGKILL leaves a file readable up to its last complete chunk.
+    """
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self._raw = open(path, 'wb', buffering=0)
+
+    def write(self, data: bytes) -> int:
+        view = memoryview(data)
+        while view:
+            n = self._raw.write(view)
+            view = view[n:]
+        return len(data)
+
+    def tell(self) -> int:
+        return self._raw.tell()
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        self._raw.close()
+
+
+def _str_metadata(data: Mapping[str, Any]) -> dict[str, str]:
+    return {str(k): v if isinstance(v, str) else json.dumps(v, default=str)
+            for k, v in data.items()}
+
+
+class McapRecorder:
+    """Context manager writing already-serialised CDR messages to an MCAP file.
+
+    Used by the recorder node (which receives raw CDR bytes from rclpy).  Chunks are
+    small (``chunk_size``, default 256 KiB) and are also closed every
+    ``flush_interval`` seconds of wall time, and each chunk is written through to the
+    OS: after a crash/SIGKILL the file can be read up to its last complete chunk by
+    :func:`read_run`.
+
+    Parameters
+    ----------
+    path : path-like
+        Output file (overwritten).
+    chunk_size : int
+        Uncompressed bytes per chunk [B].
+    compression : {'zstd', 'lz4', 'none'}
+        Chunk compression.
+    flush_interval : float
+        Longest time a message waits in an open chunk [s] (wall clock); 0 disables.
+    """
+
+    def __init__(self, path: str | os.PathLike, *, chunk_size: int = 256 * 1024,
+                 compression: str = 'zstd', flush_interval: float = 1.0) -> None:
+        from mcap.writer import Writer
+        if chunk_size <= 0:
+            raise ParameterError(f'chunk_size must be > 0, got {chunk_size}')
+        self.path = Path(path)
+        try:
+            self._file = _Unbuffered(self.path)
+        except OSError as exc:
+            raise InputFileError(f'{self.path}: cannot write ({exc.strerror})') from None
+        self._writer = Writer(self._file, chunk_size=int(chunk_size),
+                              compression=_compression(compression))
+        self._writer.start(profile='ros2', library=_library())
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._sequence: dict[str, int] = {}
+        self._flush_interval = float(flush_interval)
+        self._last_flush = time.monotonic()
+        self._closed = False
+        self.message_count = 0
+
+    def __enter__(self) -> McapRecorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def add_channel(self, topic: str, msgtype: str, *, definition: str | None = None,
+                    qos_yaml: str | None = None) -> int:
+        """Register ``topic`` of ROS type ``msgtype`` (e.g. ``sensor_msgs/msg/JointState``).
+
+        ``definition`` is the full ros2msg text for types this module does not know;
+        ``qos_yaml`` the offered QoS profiles in rosbag2's YAML layout.  Returns the
+        channel id.  Registering a topic twice returns the existing channel.
+        """
+        if topic in self._channels:
+            return self._channels[topic]
+        msgtype = schemas.normalise_type(msgtype)
+        text = definition if definition is not None else schemas.DEFINITIONS.get(msgtype)
+        if text is None:
+            raise ParameterError(f'{topic}: no message definition known for {msgtype}; '
+                                 'pass definition=')
+        if msgtype not in self._schemas:
+            self._schemas[msgtype] = self._writer.register_schema(
+                msgtype, 'ros2msg', text.encode())
+        cid = self._writer.register_channel(
+            topic, 'cdr', self._schemas[msgtype],
+            metadata=schemas.channel_metadata(msgtype, qos_yaml=qos_yaml))
+        self._channels[topic] = cid
+        self._sequence[topic] = 0
+        return cid
+
+    def write_cdr(self, topic: str, data: bytes, log_time_ns: int,
+                  publish_time_ns: int | None = None) -> None:
+        """Append one serialised message of a registered topic (times in ns)."""
+        try:
+            cid = self._channels[topic]
+        except KeyError:
+            raise ParameterError(f'{topic}: add_channel() before write_cdr()') from None
+        seq = self._sequence[topic]
+        self._sequence[topic] = seq + 1
+        log_time_ns = int(log_time_ns)
+        self._writer.add_message(
+            channel_id=cid, log_time=log_time_ns, data=bytes(data),
+            publish_time=log_time_ns if publish_time_ns is None else int(publish_time_ns),
+            sequence=seq & 0xFFFFFFFF)
+        self.message_count += 1
+        if self._flush_interval > 0:
+            now = time.monotonic()
+            if now - self._last_flush >= self._flush_interval:
+                self._writer.flush()
+                self._last_flush = now
+
+    def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
+        """Write an MCAP metadata record (values are stored as strings)."""
+        self._writer.add_metadata(str(name), _str_metadata(data))
+
+    def flush(self) -> None:
+        """Close the open chunk and write it to the file."""
+        self._writer.flush()
+        self._last_flush = time.monotonic()
+
+    def close(self) -> None:
+        """Write the summary and footer and close the file (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._writer.finish()
+        finally:
+            self._file.close()
+
+
+def write_run(path: str | os.PathLike, run: Run, *, metadata: Mapping[str, Any] | None = None,
+              namespace: str = 'axis', chunk_size: int = 1024 * 1024,
+              compression: str = 'zstd') -> None:
+    """Write ``run`` as a canonical MCAP (DESIGN.md §5 topics).
+
+    ``/axis/reference`` (if the run has a reference), ``/axis/joint_states`` and
+    ``/axis/voltage`` (if any) are written at the stamps ``run.t`` [s] (header stamp,
+    log and publish time), time-ordered; ``run.metadata`` updated by ``metadata`` goes
+    into the ``motor_comp`` metadata record.  Times must be ≥ 0 (MCAP times are
+    unsigned nanoseconds).
+    """
+    t = np.asarray(run.t, dtype=float)
+    if t.size and (not np.all(np.isfinite(t)) or t[0] < 0):
+        raise ParameterError(f'{run.name}: times must be finite and >= 0 to write MCAP')
+    ns = np.round(t * 1e9).astype(np.int64)
+    if ns.size > 1 and np.any(np.diff(ns) <= 0):
+        raise ParameterError(f'{run.name}: times must be strictly increasing (at ns resolution)')
+    names = schemas.topics(namespace)
+
+    def sl(a: np.ndarray | None, b: slice) -> np.ndarray | None:
+        return None if a is None else a[b]
+
+    # (topic, type, encoder of a block of samples), in per-stamp publication order
+    streams: list[tuple[str, str, Callable[[slice], np.ndarray]]] = []
+    if run.reference is not None:
+        streams.append((names['reference'], schemas.JOINT_STATE,
+                        lambda b: cdr.encode_joint_states(
+                            ns[b], run.reference[b], sl(run.reference_velocity, b))))
+    streams.append((names['joint_states'], schemas.JOINT_STATE,
+                    lambda b: cdr.encode_joint_states(ns[b], run.position[b],
+                                                      sl(run.velocity, b), sl(run.effort, b))))
+    if run.voltage is not None:
+        streams.append((names['voltage'], schemas.FLOAT64,
+                        lambda b: cdr.encode_float64(run.voltage[b])))
+    meta = dict(run.metadata)
+    meta.update(metadata or {})
+    with McapRecorder(path, chunk_size=chunk_size, compression=compression,
+                      flush_interval=0.0) as rec:
+        if meta:
+            rec.add_metadata(METADATA_NAME, meta)
+        ids = [rec.add_channel(topic, typ) for topic, typ, _ in streams]
+        add = rec._writer.add_message   # the per-message bookkeeping of write_cdr is not needed
+        block = 8192                     # encode in blocks: memory stays bounded
+        for b0 in range(0, ns.size, block):
+            b = slice(b0, min(b0 + block, ns.size))
+            payloads = [[row.tobytes() for row in enc(b)] for _, _, enc in streams]
+            for k, tk in enumerate(ns[b].tolist()):
+                for cid, pl in zip(ids, payloads):
+                    add(channel_id=cid, log_time=tk, data=pl[k], publish_time=tk,
+                        sequence=b0 + k)
+        rec.message_count = ns.size * len(streams)
+
+
+# ============================================================================ reading
+
+class _Column:
+    """A growing array (capacity doubles).
+
+    Why not a list of per-chunk arrays: those are small heap blocks, and the heap they
+    fragment is not returned to the OS after concatenation, doubling the peak memory of
+    long runs.  Large buffers are mmap-backed and untouched capacity is not resident.
+    Absent values (an int count) allocate nothing until real data arrives (then NaN).
+    """
+
+    def __init__(self) -> None:
+        self.buf: np.ndarray | None = None
+        self.n = 0
+
+    def append(self, values: np.ndarray | int) -> None:
+        if isinstance(values, int):
+            if self.buf is not None:
+                self._reserve(values)
+                self.buf[self.n:self.n + values] = np.nan
+            self.n += values
+            return
+        if self.buf is None:
+            self.buf = np.empty(max(2 * (self.n + values.size), 4096), values.dtype)
+            if self.n:
+                self.buf[:self.n] = np.nan
+        self._reserve(values.size)
+        self.buf[self.n:self.n + values.size] = values
+        self.n += values.size
+
+    def _reserve(self, extra: int) -> None:
+        assert self.buf is not None
+        if self.n + extra > self.buf.size:
+            grown = np.empty(max(2 * self.buf.size, self.n + extra), self.buf.dtype)
+            grown[:self.n] = self.buf[:self.n]
+            self.buf = grown
+
+    def take(self) -> np.ndarray:
+        if self.buf is None:
+            return np.full(self.n, np.nan)
+        out = self.buf[:self.n].copy() if self.buf.size > 1.25 * self.n else self.buf[:self.n]
+        self.buf = None
+        return out
+
+
+@dataclasses.dataclass
+class _Topic:
+    """Decoded samples of one topic, accumulated chunk by chunk."""
+
+    topic: str
+    kind: str                     # 'joint' or 'scalar'
+    columns: dict[str, _Column] = dataclasses.field(default_factory=dict)
+    corrupt: int = 0
+    messages: int = 0
+    log_minus_stamp: list[np.ndarray] = dataclasses.field(default_factory=list)
+
+    def add(self, **arrays: np.ndarray | int) -> None:
+        """Append a chunk's arrays (an int ``n`` stands for ``n`` absent values)."""
+        for k, v in arrays.items():
+            col = self.columns.get(k)
+            if col is None:
+                col = self.columns[k] = _Column()
+            col.append(v)
+
+    def get(self, key: str) -> np.ndarray:
+        """Return the samples of ``key`` and release them (call once per key)."""
+        col = self.columns.pop(key, None)
+        return np.empty(0) if col is None else col.take()
+
+    def count(self) -> int:
+        return self.messages
+
+
+@dataclasses.dataclass
+class _Channel:
+    topic: str
+    schema_name: str
+    encoding: str
+    schema: Any
+
+
+class _Damage(Exception):
+    """Reading stopped at byte ``offset`` for ``reason``."""
+
+    def __init__(self, offset: int, reason: str) -> None:
+        super().__init__(reason)
+        self.offset = offset
+        self.reason = reason
+
+
+def _gather_u64(buf: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Return the little-endian uint64 at each offset ``at`` of ``buf``."""
+    return np.ascontiguousarray(buf[at[:, None] + np.arange(8)]).view('<u8')[:, 0]
+
+
+def _record_stream(data: bytes):
+    from mcap.data_stream import ReadDataStream
+    return ReadDataStream(io.BytesIO(data))
+
+
+def _decompress(compression: str, data: bytes, size: int) -> bytes:
+    # Decompression with the codecs the mcap library itself uses (zstandard, lz4):
+    # mcap's own helper wraps the result in a per-record parsing stream we do not want.
+    if compression == '':
+        return data
+    if compression == 'zstd':
+        import zstandard
+        return zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
+    if compression == 'lz4':
+        import lz4.frame
+        return lz4.frame.decompress(data)
+    raise ValueError(f'unsupported chunk compression {compression!r}')
+
+
+class _Reader:
+    """One pass over an MCAP file, decoding the wanted topics chunk by chunk."""
+
+    def __init__(self, path: Path, wanted: Mapping[str, str], joint: str,
+                 progress: Progress) -> None:
+        self.path = path
+        self.wanted = wanted           # topic -> kind
+        self.joint = np.frombuffer(joint.encode(), np.uint8).copy()
+        self.joint_name = joint
+        self.progress = progress
+        self.schemas: dict[int, Any] = {}
+        self.channels: dict[int, _Channel] = {}
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.topics: dict[str, _Topic] = {}
+        self.all_topics: dict[str, str] = {}
+        self.messages = 0
+        self._decoders: dict[int, Callable[[bytes], Any]] = {}
+        self._open: tuple[int, np.ndarray] | None = None
+        self._index: dict[int, np.ndarray] = {}
+
+    # ---------------------------------------------------------------- records
+    def _records(self, f: io.BufferedReader, size: int) -> Iterator[tuple[int, int, bytes]]:
+        # Own top-level loop rather than mcap.StreamReader: that one makes a Python
+        # object of every message-index entry (we read them as numpy arrays) and cannot
+        # say at which byte a damaged file stops.
+        pos = 8
+        while True:
+            head = f.read(9)
+            if not head:
+                raise _Damage(pos, 'file ends without footer (not finalised)')
+            if len(head) < 9:
+                raise _Damage(pos, 'truncated record header')
+            op, length = struct.unpack('<BQ', head)
+            if length > size - pos - 9:
+                raise _Damage(pos, f'record of {length} bytes runs past the end of the file')
+            if op in (_OP_SCHEMA, _OP_CHANNEL, _OP_CHUNK, _OP_METADATA, _OP_MESSAGE,
+                      _OP_MESSAGE_INDEX, _OP_HEADER, _OP_FOOTER, _OP_DATA_END):
+                body = f.read(length)
+            else:                      # chunk indexes, attachments, statistics: unused
+                f.seek(length, io.SEEK_CUR)
+                body = b''
+            yield pos, op, body
+            pos += 9 + length
+            self.progress.update(pos)
+            if op in (_OP_DATA_END, _OP_FOOTER):
+                return
+
+    def read(self) -> tuple[bool, _Damage | None]:
+        """Read the file; return (complete, damage)."""
+        size = self.path.stat().st_size
+        with open(self.path, 'rb') as f:
+            if f.read(8) != MAGIC:
+                raise InputFileError(f'{self.path}: not an MCAP file (bad magic bytes)')
+            pending: list[tuple[int, int, int, bytes]] = []
+            try:
+                for pos, op, body in self._records(f, size):
+                    try:
+                        if op == _OP_MESSAGE_INDEX:
+                            self._add_index(body)
+                            continue
+                        self._close_chunk()
+                        if op == _OP_MESSAGE:
+                            cid, _seq, log, pub = struct.unpack_from('<HIQQ', body)
+                            pending.append((cid, log, pub, body[22:]))
+                            if len(pending) >= 4096:
+                                self._flush_pending(pending)
+                            continue
+                        if pending:
+                            self._flush_pending(pending)
+                        if op == _OP_CHUNK:
+                            # decoded once its message indexes (the next records) are in
+                            self._open = (pos, self._chunk_bytes(body))
+                        else:
+                            self._record(op, body)
+                    except (InputFileError, _Damage):
+                        raise
+                    except Exception as exc:  # noqa: BLE001 - any parse failure is damage
+                        raise _Damage(pos, f'{type(exc).__name__}: {exc}') from None
+                self._close_chunk()
+                if pending:
+                    self._flush_pending(pending)
+            except _Damage as dmg:
+                self._index = {}          # the chunk is intact, its index may not be
+                try:
+                    self._close_chunk()
+                except _Damage:
+                    pass
+                return False, dmg
+        return True, None
+
+    def _record(self, op: int, body: bytes) -> None:
+        from mcap.records import Channel, Metadata, Schema
+        if op == _OP_SCHEMA:
+            s = Schema.read(_record_stream(body))
+            self.schemas[s.id] = s
+        elif op == _OP_CHANNEL:
+            self._add_channel(Channel.read(_record_stream(body)))
+        elif op == _OP_METADATA:
+            m = Metadata.read(_record_stream(body))
+            self.metadata.setdefault(m.name, {}).update(m.metadata)
+
+    def _add_channel(self, ch: Any) -> None:
+        schema = self.schemas.get(ch.schema_id)
+        name = schemas.normalise_type(schema.name) if schema is not None else ''
+        self.all_topics[ch.topic] = name
+        if ch.topic not in self.wanted:
+            return
+        kind = self.wanted[ch.topic]
+        if kind == 'joint' and name != schemas.JOINT_STATE:
+            raise InputFileError(f'{self.path}: {ch.topic} has type {name or "(no schema)"}, '
+                                 f'expected {schemas.JOINT_STATE}')
+        if ch.message_encoding != 'cdr':
+            raise InputFileError(f'{self.path}: {ch.topic} is {ch.message_encoding!r}-encoded; '
+                                 'only ROS 2 CDR is supported')
+        self.channels[ch.id] = _Channel(ch.topic, name, ch.message_encoding, schema)
+        self.topics.setdefault(ch.topic, _Topic(ch.topic, kind))
+
+    def _chunk_bytes(self, body: bytes) -> np.ndarray:
+        """Decompress and CRC-check a chunk record's records."""
+        start, end, usize, crc = struct.unpack_from('<QQQI', body)
+        (clen,) = struct.unpack_from('<I', body, 28)
+        comp = body[32:32 + clen].decode()
+        (dlen,) = struct.unpack_from('<Q', body, 32 + clen)
+        data = body[40 + clen:40 + clen + dlen]
+        if len(data) != dlen:
+            raise ValueError('chunk shorter than its declared length')
+        if usize > _MAX_CHUNK:       # a corrupt size must not trigger a huge allocation
+            raise ValueError(f'chunk claims {usize} uncompressed bytes')
+        raw = _decompress(comp, data, usize)
+        if len(raw) != usize:
+            raise ValueError(f'chunk decompressed to {len(raw)} bytes, expected {usize}')
+        if crc and zlib.crc32(raw) != crc:
+            raise ValueError('chunk CRC mismatch')
+        return np.frombuffer(raw, np.uint8)
+
+    def _add_index(self, body: bytes) -> None:
+        """Collect a message index record of the open chunk (offsets of its messages)."""
+        if self._open is None:
+            return
+        cid, nbytes = struct.unpack_from('<HI', body)
+        if nbytes % 16 or 6 + nbytes > len(body):
+            raise ValueError('malformed message index')
+        pairs = np.frombuffer(body, '<u8', count=nbytes // 8, offset=6).reshape(-1, 2)
+        self._index[cid] = pairs[:, 1].astype(np.int64)
+
+    def _close_chunk(self) -> None:
+        """Decode the open chunk: by its message indexes if they check out, else by scanning."""
+        if self._open is None:
+            return
+        pos, buf = self._open
+        index, self._open, self._index = self._index, None, {}
+        try:
+            if not (index and self._indexed_chunk(buf, index)):
+                self._records_buffer(buf)
+        except InputFileError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - any parse failure is damage
+            raise _Damage(pos, f'{type(exc).__name__}: {exc}') from None
+
+    def _indexed_chunk(self, buf: np.ndarray, index: Mapping[int, np.ndarray]) -> bool:
+        """Decode a chunk with numpy using its message indexes; False if they do not fit.
+
+        The index must account for every message: the records between indexed messages
+        are walked and must be schemas/channels only, else the scanner is used.
+        """
+        n = buf.shape[0]
+        offs = np.concatenate(list(index.values()))
+        if offs.size == 0 or offs.min() < 0 or offs.max() > n - 31:
+            return False
+        order = np.argsort(offs, kind='stable')
+        cids = np.concatenate([np.full(v.size, c) for c, v in index.items()])[order]
+        offs = offs[order]
+        if not np.all(buf[offs] == _OP_MESSAGE):
+            return False
+        lens = _gather_u64(buf, offs + 1).astype(np.int64)
+        ends = offs + 9 + lens
+        if np.any(lens < 22) or np.any(ends > n) or np.any(offs[1:] < ends[:-1]):
+            return False
+        if not np.array_equal(buf[offs + 9] | (buf[offs + 10].astype(np.int64) << 8), cids):
+            return False
+        starts = np.concatenate(([0], ends))
+        stops = np.concatenate((offs, [n]))
+        for g0, g1 in zip(starts[starts != stops], stops[starts != stops]):
+            p = int(g0)
+            while p < g1:
+                if p + 9 > g1:
+                    return False
+                op, ln = struct.unpack_from('<BQ', buf, p)
+                if op == _OP_MESSAGE or p + 9 + ln > g1:
+                    return False
+                if op in (_OP_SCHEMA, _OP_CHANNEL):
+                    self._record(op, buf[p + 9:p + 9 + ln].tobytes())
+                p += 9 + ln
+        self.messages += int(offs.size)
+        for cid, ch in self.channels.items():
+            sel = np.flatnonzero(cids == cid)
+            if sel.size == 0:
+                continue
+            o = offs[sel]
+            ds, dl = o + 31, lens[sel] - 22
+            log = _gather_u64(buf, o + 15).astype(np.int64)
+            topic = self.topics[ch.topic]
+            if not (np.all(dl == dl[0]) and self._fixed(ch, topic, buf, ds, int(dl[0]), log)):
+                self._decode(ch, topic, buf, log, ds, dl)
+        return True
+
+    def _fixed(self, ch: _Channel, topic: _Topic, buf: np.ndarray, ds: np.ndarray,
+               length: int, log: np.ndarray) -> bool:
+        """Decode payloads of one length as a byte matrix; False if the layout varies."""
+        rows = cdr.payload_matrix(buf, ds, length)
+        if topic.kind == 'joint':
+            layout = cdr.joint_state_layout(rows[0].tobytes(), self.joint_name.encode())
+            if not isinstance(layout, cdr.JointStateLayout):
+                return False
+            res = cdr.decode_joint_states_fixed(rows, layout)
+            if res is None:
+                return False
+            stamp, pos, vel, eff, present = res
+            self._store_joint(topic, stamp, log, pos, vel, eff, present)
+            return True
+        if ch.schema_name != schemas.FLOAT64:
+            return False
+        val = cdr.decode_float64_fixed(rows)
+        if val is None:
+            return False
+        topic.add(stamp=log, value=val)
+        topic.messages += int(log.size)
+        return True
+
+    def _flush_pending(self, pending: list[tuple[int, int, int, bytes]]) -> None:
+        # Top-level (unchunked) messages: rebuild them as one record buffer so the same
+        # scanner/decoders handle them.
+        parts = []
+        for cid, log, pub, data in pending:
+            parts.append(struct.pack('<BQHIQQ', _OP_MESSAGE, 22 + len(data), cid, 0, log, pub))
+            parts.append(data)
+        pending.clear()
+        self._records_buffer(np.frombuffer(b''.join(parts), np.uint8))
+
+    def _records_buffer(self, buf: np.ndarray) -> None:
+        """Decode a buffer of records by scanning it (no message index to go by)."""
+        from motor_comp.logs import cdr_jit
+        op, start, length, chan, log, pub, ds, dl, end = cdr_jit.scan_records(buf)
+        if end != buf.shape[0]:
+            raise ValueError('chunk records are truncated or corrupt')
+        is_msg = op == _OP_MESSAGE
+        for i in np.flatnonzero(~is_msg):
+            if op[i] in (_OP_SCHEMA, _OP_CHANNEL):
+                self._record(int(op[i]), buf[start[i]:start[i] + length[i]].tobytes())
+        self.messages += int(np.count_nonzero(is_msg))
+        for cid, ch in self.channels.items():
+            sel = np.flatnonzero(is_msg & (chan == cid))
+            if sel.size:
+                self._decode(ch, self.topics[ch.topic], buf, log[sel], ds[sel], dl[sel])
+
+    # ---------------------------------------------------------------- decoding
+    def _store_joint(self, topic: _Topic, stamp: np.ndarray, log: np.ndarray,
+                     pos: np.ndarray | None, vel: np.ndarray | None, eff: np.ndarray | None,
+                     present: np.ndarray) -> None:
+        if stamp.size > 1 and not np.any(stamp):
+            stamp = log                # the publisher does not stamp: use log times
+        if sum(a.size for a in topic.log_minus_stamp) < 10_000:
+            topic.log_minus_stamp.append(log - stamp)
+        arrays: dict[str, np.ndarray | int] = {'stamp': stamp, 'present': present}
+        # absent arrays (e.g. reference effort) are not stored: NaN-filled on assembly
+        for key, bit, arr in (('position', cdr.HAS_POSITION, pos),
+                              ('velocity', cdr.HAS_VELOCITY, vel),
+                              ('effort', cdr.HAS_EFFORT, eff)):
+            has = arr is not None and np.any(present & bit)
+            arrays[key] = arr if has else int(stamp.size)   # type: ignore[assignment]
+        topic.add(**arrays)
+        topic.messages += int(stamp.size)
+
+    def _decode(self, ch: _Channel, topic: _Topic, buf: np.ndarray, log: np.ndarray,
+                ds: np.ndarray, dl: np.ndarray) -> None:
+        """Decode message by message (compiled), general decoder for foreign encodings."""
+        from motor_comp.logs import cdr_jit
+        if topic.kind == 'joint':
+            stamp, pos, vel, eff, present, status = cdr_jit.decode_joint_states(
+                buf, ds, dl, self.joint)
+            if np.any(status == cdr.NO_JOINT):
+                i = int(np.flatnonzero(status == cdr.NO_JOINT)[0])
+                msg = self._general(ch)(buf[ds[i]:ds[i] + dl[i]].tobytes())
+                raise InputFileError(f'{self.path}: {ch.topic} has no joint named '
+                                     f'{self.joint_name!r} (joints: {list(msg.name)})')
+            for i in np.flatnonzero(status == cdr.FOREIGN):
+                stamp[i], pos[i], vel[i], eff[i], present[i], status[i] = self._joint_general(
+                    ch, buf[ds[i]:ds[i] + dl[i]].tobytes())
+            ok = status == cdr.OK
+            topic.corrupt += int(ok.size - np.count_nonzero(ok))
+            self._store_joint(topic, stamp[ok], log[ok], pos[ok], vel[ok], eff[ok], present[ok])
+        else:
+            if ch.schema_name == schemas.FLOAT64:
+                val, status = cdr_jit.decode_float64(buf, ds, dl)
+            else:
+                val = np.full(ds.shape[0], np.nan)
+                status = np.full(ds.shape[0], cdr.FOREIGN, np.uint8)
+            for i in np.flatnonzero(status == cdr.FOREIGN):
+                val[i], status[i] = self._scalar_general(ch, buf[ds[i]:ds[i] + dl[i]].tobytes())
+            ok = status == cdr.OK
+            topic.corrupt += int(ok.size - np.count_nonzero(ok))
+            topic.add(stamp=log[ok], value=val[ok])
+            topic.messages += int(np.count_nonzero(ok))
+
+    def _general(self, ch: _Channel) -> Callable[[bytes], Any]:
+        from mcap_ros2.decoder import DecoderFactory
+        key = id(ch)
+        if key not in self._decoders:
+            if ch.schema is None:
+                raise InputFileError(f'{self.path}: {ch.topic} has no schema to decode it')
+            dec = DecoderFactory().decoder_for('cdr', ch.schema)
+            if dec is None:
+                raise InputFileError(f'{self.path}: cannot decode {ch.topic} '
+                                     f'(schema {ch.schema.encoding!r})')
+            self._decoders[key] = dec
+        return self._decoders[key]
+
+    def _joint_general(self, ch: _Channel, data: bytes) -> tuple:
+        """Decode with the general (mcap_ros2) decoder what the fast path does not handle."""
+        try:
+            m = self._general(ch)(data)
+            names = list(m.name)
+            j = names.index(self.joint_name) if self.joint_name in names else 0
+            stamp = int(m.header.stamp.sec) * 1_000_000_000 + int(m.header.stamp.nanosec)
+            out, present = [], 0
+            for bit, arr in ((cdr.HAS_POSITION, m.position), (cdr.HAS_VELOCITY, m.velocity),
+                             (cdr.HAS_EFFORT, m.effort)):
+                if len(arr) > j:
+                    out.append(float(arr[j]))
+                    present |= bit
+                else:
+                    out.append(np.nan)
+            return (stamp, *out, present, cdr.OK)
+        except InputFileError:
+            raise
+        except Exception:  # noqa: BLE001 - undecodable payload: counted as corrupt
+            return (0, np.nan, np.nan, np.nan, 0, cdr.SHORT)
+
+    def _scalar_general(self, ch: _Channel, data: bytes) -> tuple[float, int]:
+        try:
+            return float(self._general(ch)(data).data), cdr.OK
+        except InputFileError:
+            raise
+        except Exception:  # noqa: BLE001 - undecodable payload: counted as corrupt
+            return np.nan, cdr.SHORT
+
+
+def _clean(path: Path, topic: str, field: str, t: np.ndarray, v: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Sort, de-duplicate and drop non-finite samples of one signal (warning on stderr)."""
+    if t.size == 0:
+        return None
+    finite = np.isfinite(v)
+    bad = int(t.size - np.count_nonzero(finite))
+    if bad:
+        warn(f'{path.name}: {topic} {field}: dropped {bad} non-finite (NaN/Inf) samples')
+        t, v = t[finite], v[finite]
+        if t.size == 0:
+            return None
+    d = np.diff(t)
+    if np.any(d <= 0):
+        unsorted = int(np.count_nonzero(d < 0))
+        order = np.argsort(t, kind='stable')
+        t, v = t[order], v[order]
+        keep = np.append(t[1:] != t[:-1], True)      # last message of each stamp
+        dup = int(t.size - np.count_nonzero(keep))
+        t, v = t[keep], v[keep]
+        if field in ('position', 'value'):           # once per topic, not per field
+            warn(f'{path.name}: {topic}: {unsorted} out-of-order stamps sorted, '
+                 f'{dup} duplicate stamps dropped (kept the last)')
+    return t, v
+
+
+def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str = 'axis',
+             joint: str = 'axis') -> Run:
+    """Read an MCAP run into time-aligned arrays (see the module docstring for policies).
+
+    Parameters
+    ----------
+    path : path-like
+        MCAP file with ``/<namespace>/joint_states`` (required), ``reference`` and
+        ``voltage`` (optional) topics, or a rosbag2 directory holding one such file.
+    progress : bool
+        Print a progress line on stderr while reading.
+    namespace : str
+        Topic namespace (DESIGN.md §5), ``axis`` by default.
+    joint : str
+        Joint name to take from multi-joint ``JointState`` messages.
+
+    Returns
+    -------
+    Run
+        ``t`` [s] from the joint-state stamps; ``metadata`` holds the ``motor_comp``
+        metadata record's keys, other records' keys as ``name/key``.
+
+    Raises
+    ------
+    InputFileError
+        Missing, empty, non-MCAP or unreadable file, or no joint-state samples.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputFileError(f'{path}: no such file')
+    if path.is_dir():                  # a rosbag2 directory holding one MCAP file
+        files = sorted(path.glob('*.mcap'))
+        if len(files) != 1:
+            raise InputFileError(f'{path}: a directory with {len(files)} .mcap files; '
+                                 'pass one MCAP file')
+        path = files[0]
+    if not path.is_file():
+        raise InputFileError(f'{path}: not a file')
+    size = path.stat().st_size
+    if size == 0:
+        raise InputFileError(f'{path}: empty file')
+    if size < 8:
+        raise InputFileError(f'{path}: not an MCAP file (only {size} bytes)')
+    names = schemas.topics(namespace)
+    wanted = {names['reference']: 'joint', names['joint_states']: 'joint',
+              names['voltage']: 'scalar'}
+    prog = Progress(path.name, size, enabled=progress)
+    reader = _Reader(path, wanted, joint, prog)
+    try:
+        complete, damage = reader.read()
+    except OSError as exc:
+        raise InputFileError(f'{path}: cannot read ({exc.strerror or exc})') from None
+    finally:
+        prog.finish()
+    for tp in reader.topics.values():
+        if tp.corrupt:
+            warn(f'{path.name}: {tp.topic}: skipped {tp.corrupt} undecodable messages')
+    js = reader.topics.get(names['joint_states'])
+    if js is None or js.count() == 0:
+        if damage is not None and reader.messages == 0:
+            raise InputFileError(f'{path}: corrupt or truncated at byte {damage.offset} '
+                                 f'({damage.reason}); no messages could be read')
+        found = ', '.join(sorted(reader.all_topics)) or 'none'
+        raise InputFileError(f'{path}: no {names["joint_states"]} messages '
+                             f'(topics in file: {found})')
+    run = _assemble(path, reader, names)
+    if damage is not None:
+        span = f'{run.t[0]:.6g}–{run.t[-1]:.6g} s' if len(run) else 'no samples'
+        warn(f'{path.name}: {"unfinished" if "footer" in damage.reason else "damaged"} '
+             f'file, reading stopped at byte {damage.offset} of {size} ({damage.reason}); '
+             f'recovered {reader.messages} messages, {len(run)} samples, {span}')
+    return run
+
+
+def _masked(stamp: np.ndarray, values: np.ndarray, present: np.ndarray, bit: int
+            ) -> tuple[np.ndarray, np.ndarray]:
+    m = (present & bit) != 0
+    if m.all():                    # the usual case: no copies
+        return stamp, values
+    return stamp[m], values[m]
+
+
+def _assemble(path: Path, reader: _Reader, names: Mapping[str, str]) -> Run:
+    # Memory: each decoded array is concatenated once and released as soon as it has
+    # been aligned, so the peak stays near the size of the decoded data.
+    js = reader.topics[names['joint_states']]
+    present = js.get('present').astype(np.uint8)
+    stamp = js.get('stamp')
+    series: dict[str, tuple[np.ndarray, np.ndarray] | None] = {}
+    for field, bit in (('position', cdr.HAS_POSITION), ('velocity', cdr.HAS_VELOCITY),
+                       ('effort', cdr.HAS_EFFORT)):
+        series[field] = _clean(path, js.topic, field,
+                               *_masked(stamp, js.get(field), present, bit))
+    del stamp, present
+    if series['position'] is None:
+        raise InputFileError(f'{path}: {js.topic} carries no finite position samples')
+    ref = reader.topics.get(names['reference'])
+    if ref is not None and ref.count():
+        rp = ref.get('present').astype(np.uint8)
+        rs = ref.get('stamp')
+        for field, key, bit in (('reference', 'position', cdr.HAS_POSITION),
+                                ('reference_velocity', 'velocity', cdr.HAS_VELOCITY)):
+            series[field] = _clean(path, ref.topic, key, *_masked(rs, ref.get(key), rp, bit))
+        del rp, rs
+    volt = reader.topics.get(names['voltage'])
+    if volt is not None and volt.count():
+        vt = volt.get('stamp').astype(np.int64)
+        offset = -int(np.median(np.concatenate(js.log_minus_stamp)))
+        if abs(offset) > 1_000_000_000:   # stamps and log times are different clocks
+            vt = vt + offset
+        series['voltage'] = _clean(path, volt.topic, 'value', vt, volt.get('value'))
+
+    t_ns, position = series.pop('position')   # type: ignore[misc]
+    present_series = {f: s for f, s in series.items() if s is not None}
+    # the run starts at the first measurement at which every signal has a value
+    start = max((int(s[0][0]) for s in present_series.values()), default=int(t_ns[0]))
+    first = int(np.searchsorted(t_ns, start, side='left'))
+    if first >= t_ns.size:
+        late = max(present_series, key=lambda f: present_series[f][0][0])
+        raise InputFileError(f'{path}: {late} starts after the last measurement '
+                             '(topics do not overlap in time)')
+    t_ns = t_ns[first:]
+    aligned: dict[str, np.ndarray] = {}
+    for field in list(present_series):
+        ts, vs = present_series.pop(field)
+        series[field] = None
+        if ts.size == t_ns.size and np.array_equal(ts, t_ns):
+            aligned[field] = vs                      # same stamps: nothing to align
+        else:
+            # sample and hold: the latest value stamped at or before each measurement
+            aligned[field] = vs[np.searchsorted(ts, t_ns, side='right') - 1]
+        del ts, vs
+    meta: dict[str, Any] = {}
+    for name, rec in reader.metadata.items():
+        for k, v in rec.items():
+            meta[k if name == METADATA_NAME else f'{name}/{k}'] = v
+    return Run(t=t_ns / 1e9, position=position[first:], metadata=meta, name=path.stem,
+               **aligned)

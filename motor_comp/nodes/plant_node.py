@@ -1,0 +1,251 @@
+"""``plant_node``: the simulated axis (PMLM or ball-screw) as a ROS 2 node.
+
+A thin adapter over :class:`motor_comp.physics.plant.Plant` (the compiled kernel's
+``plant_advance``/``plant_measure``, the same functions the in-process simulator loops
+over).  Publishes ``<ns>/joint_states`` (measured position [m], velocity [m/s], effort =
+actuator force [N]) and, in lockstep, ``/clock``; subscribes ``<ns>/voltage`` [V].
+
+Lockstep protocol (the plant owns sim time)::
+
+    plant:  /clock t_k, joint_states(t_k)  ->  trajectory: reference(t_k)
+    controller: waits for reference(t_k) and joint_states(t_k), publishes voltage u_k
+    plant:  on u_k, advances one control period, k += 1, publishes the next pair
+
+so step k is applied exactly when its command arrived, whatever the speed of the
+machine: the run is deterministic and as fast as the slowest process allows.  Before
+step 0 the plant waits until the controller, the trajectory and ``expected_subscribers``
+readers of ``joint_states`` (controller + recorder by default) are matched, so nodes can
+start in any order.  With ``duration`` > 0 the node exits after that much sim time.
+
+Realtime: after the same wait for peers, a wall-clock timer at ``control_rate``
+measures, publishes (stamped with the wall clock), and advances the axis with the
+latest command received (zero-order hold).
+
+A non-finite command never reaches the physics: it is refused with a warning and the
+step is taken at 0 V, so the loop goes on.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Mapping
+
+from rclpy.duration import Duration
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+from motor_comp.errors import ParameterError
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, Param, ParamNode, \
+    SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, TOPIC_VOLTAGE, Timing, period_ns, run_node, \
+    set_stamp
+from motor_comp.physics.config import load_plant
+from motor_comp.physics.plant import Plant, StepLoad
+
+PARAMS = (
+    Param('plant', 'pmlm', 'Plant: pmlm, ballscrew, or a plant YAML file', read_only=True),
+    Param('timing', 'lockstep', 'Timing mode', choices=('lockstep', 'realtime'),
+          read_only=True),
+    Param('control_rate', 1000.0, 'Control (publish/step) rate', 'Hz', 1.0, 100_000.0,
+          read_only=True),
+    Param('physics_rate', 0.0, 'Physics rate (0 = the plant file value)', 'Hz', 0.0, 1e7,
+          read_only=True),
+    Param('duration', 0.0, 'Run length in sim time, then exit (0 = forever)', 's', 0.0,
+          1e7, read_only=True),
+    Param('seed', 0, 'Seed of the measurement-noise generator', '', 0, 2**31 - 1,
+          read_only=True),
+    Param('x0', 0.0, 'Initial position', 'm', -10.0, 10.0, read_only=True),
+    Param('load_force', 0.0, 'External step load force (subtracted like friction)', 'N',
+          -1e5, 1e5),
+    Param('load_start', 0.0, 'Sim time the step load switches on', 's', 0.0, 1e7),
+    Param('expected_subscribers', 2,
+          'Lockstep: readers of joint_states to wait for before step 0 '
+          '(controller + recorder)', '', 0, 100, read_only=True),
+    Param('expected_clock_subscribers', 2,
+          'Lockstep: readers of /clock to wait for before step 0 (trajectory + recorder)',
+          '', 0, 100, read_only=True),
+    Param('start_delay', 0.3, 'Lockstep: settle time after all peers matched', 's', 0.0,
+          60.0, read_only=True),
+)
+
+
+class PlantNode(ParamNode):
+    """The axis: advances on each command (lockstep) or on a wall timer (realtime)."""
+
+    def __init__(self) -> None:
+        super().__init__('plant_node', namespace=DEFAULT_NAMESPACE)
+        self.declare_params(PARAMS)
+        p = self.p
+        self.timing = Timing(p['timing'])
+        cfg = load_plant(p['plant'])
+        physics = p['physics_rate'] or cfg.physics_rate
+        self.plant = Plant(cfg.model, sensors=cfg.sensors, physics_rate=physics,
+                           load=StepLoad(p['load_force'], p['load_start']), seed=p['seed'],
+                           x0=p['x0'])
+        self.dt_ns = period_ns(p['control_rate'])
+        self.dt = 1.0 / p['control_rate']   # the simulator's T, bit for bit
+        self.plant.substeps(self.dt)   # validates rate compatibility up front
+        # load the compiled kernels now (numba cache) rather than inside the first tick
+        warm = Plant(cfg.model, sensors=cfg.sensors, physics_rate=physics)
+        warm.measure(self.dt)
+        warm.step(0.0, self.dt, f_ext=0.0)
+        cfg.model.input_force(0.0, 0.0)
+        self.n_steps = int(round(p['duration'] / self.dt)) if p['duration'] > 0 else -1
+        self.k = 0
+        self.refused = 0
+        self.published = 0
+        self.late = 0
+        self._t0_ns: int | None = None
+        self._finished = False
+        self._started = False
+        self._u = 0.0            # realtime: latest command (zero-order hold)
+        self._js = JointState(name=[JOINT_NAME])
+        self._js.header.frame_id = JOINT_NAME
+        self._clock_msg = Clock()
+        self.pub_js = self.create_publisher(JointState, TOPIC_JOINT_STATES, LOOP_QOS)
+        self.pub_clock = (self.create_publisher(Clock, TOPIC_CLOCK, LOOP_QOS)
+                          if self.timing is Timing.LOCKSTEP else None)
+        self.mark_hot(self.create_subscription(Float64, TOPIC_VOLTAGE, self._on_voltage,
+                                               SUB_QOS))
+        # both modes wait for their peers, so no early sample goes unanswered
+        self._waiting_since = time.monotonic()
+        self._peer_timer = self.create_timer(0.05, self._wait_for_peers)
+        self.get_logger().info(
+            f'{cfg.kind.value} plant from {cfg.source}, {self.timing.value}, '
+            f'{p["control_rate"]:g} Hz control, {physics:g} Hz physics')
+
+    # -- lockstep --------------------------------------------------------------------
+    def _peers_ready(self) -> bool:
+        ns = self.get_namespace().rstrip('/')
+        return (self.pub_js.get_subscription_count() >= self.p['expected_subscribers']
+                and self.count_publishers(f'{ns}/{TOPIC_VOLTAGE}') >= 1
+                and self.count_publishers(f'{ns}/reference') >= 1
+                and (self.pub_clock is None or self.pub_clock.get_subscription_count()
+                     >= self.p['expected_clock_subscribers']))
+
+    def _wait_for_peers(self) -> None:
+        if not self._peers_ready():
+            if time.monotonic() - self._waiting_since > 10.0:
+                self.get_logger().info('waiting for controller/trajectory/recorder …',
+                                       throttle_duration_sec=10.0)
+            return
+        self._peer_timer.cancel()
+        self.destroy_timer(self._peer_timer)
+        # DDS matching is not symmetric in time: give the peers' writers/readers a moment
+        # to match us too before the first (transient-local) sample goes out.
+        self._peer_timer = self.create_timer(self.p['start_delay'] + 1e-3, self._start)
+
+    def _start(self) -> None:
+        self._peer_timer.cancel()
+        self.destroy_timer(self._peer_timer)
+        self._started = True
+        self.get_logger().info(f'peers matched: starting {self.timing.value} run')
+        if self.timing is Timing.LOCKSTEP:
+            self._publish_step()
+        else:
+            self.mark_hot(self.create_timer(self.dt, self._on_tick))
+
+    def _publish_step(self) -> None:
+        """Publish ``/clock`` then the measurement of step ``k`` (stamp ``k·dt``)."""
+        t_ns = self.k * self.dt_ns
+        set_stamp(self._clock_msg.clock, t_ns)
+        self.pub_clock.publish(self._clock_msg)
+        self._publish_measurement(t_ns)
+
+    def _publish_measurement(self, t_ns: int) -> None:
+        m = self.plant.measure(self.dt)
+        js = self._js
+        set_stamp(js.header.stamp, t_ns)
+        js.position = [m.position]
+        js.velocity = [m.velocity]
+        js.effort = [self.plant.model.input_force(self.plant.applied_command,
+                                                  self.plant.velocity)]
+        self.pub_js.publish(js)
+        self.published += 1
+
+    def _command(self, u: float) -> float:
+        if math.isfinite(u):
+            return u
+        self.refused += 1
+        self.get_logger().warning(f'refused non-finite command {u!r}: holding 0 V',
+                                  throttle_duration_sec=1.0)
+        return 0.0
+
+    def _on_voltage(self, msg: Float64) -> None:
+        u = self._command(float(msg.data))
+        if self.timing is Timing.REALTIME:
+            self._u = u
+            return
+        if not self._started or self._finished:
+            return
+        # load at t_k = k·T exactly as the simulator evaluates it
+        self.plant.step(u, self.dt, f_ext=self.plant.load.at(self.k * self.dt))
+        self.k += 1
+        if self.k == self.n_steps:
+            self._finished = True
+            self.get_logger().info(f'run complete: {self.k} steps, '
+                                   f'{self.k * self.dt:g} s sim time')
+            return
+        self._publish_step()
+
+    # -- realtime --------------------------------------------------------------------
+    def _on_tick(self) -> None:
+        """Catch up with the wall clock, then measure and publish.
+
+        Sim time stays locked to wall time: if the machine delayed this tick by whole
+        periods, the axis is first advanced through them with the held command (the
+        controller could not have answered in between anyway).
+        """
+        if self._finished:
+            return
+        now = self.get_clock().now().nanoseconds
+        if self._t0_ns is None:
+            self._t0_ns = now
+        due = (now - self._t0_ns) // self.dt_ns
+        if self.n_steps > 0:
+            due = min(due, self.n_steps - 1)
+        while self.k < due:
+            self.plant.measure(self.dt)   # keep the encoder's velocity per period
+            self._advance()
+            self.late += 1
+        self._publish_measurement(now)
+        self._advance()
+        if self.n_steps > 0 and self.k >= self.n_steps:
+            self._finished = True
+            self.get_logger().info(f'run complete: {self.k} steps in realtime, '
+                                   f'{self.late} periods caught up without a sample')
+
+    def _advance(self) -> None:
+        self.plant.step(self._u, self.dt, f_ext=self.plant.load.at(self.k * self.dt))
+        self.k += 1
+
+    # -- parameters ------------------------------------------------------------------
+    def apply_params(self, changed: Mapping[str, Any], new: Mapping[str, Any]) -> None:
+        """Live load changes (the rest is read-only)."""
+        if {'load_force', 'load_start'} & changed.keys():
+            try:
+                self.plant.load = StepLoad(new['load_force'], new['load_start'])
+            except ValueError as exc:
+                raise ParameterError(str(exc)) from None
+
+    def finish(self, executor: Any) -> None:
+        """Make sure the last samples reached every reader, then report the count."""
+        for pub in (self.pub_js, self.pub_clock):
+            if pub is not None and executor is not None:
+                pub.wait_for_all_acked(Duration(seconds=2.0))
+        self.get_logger().info(f'stopped: {self.published} measurements published, '
+                               f'{self.k} steps, {self.refused} commands refused')
+
+    @property
+    def done(self) -> bool:
+        """The requested duration has been simulated."""
+        return self._finished
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console entry point ``plant_node`` (``ros2 run motor_comp plant_node``)."""
+    return run_node(PlantNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,244 @@
+"""``recorder_node``: records the axis topics to MCAP (ros2 profile, ros2msg, CDR).
+
+Subscribes with ``raw=True`` and hands the serialized CDR bytes unchanged to
+:class:`motor_comp.logs.McapRecorder` — no decode/encode round trip, so the file holds
+exactly what was on the wire.  Topics: ``<ns>/reference``, ``<ns>/joint_states``,
+``<ns>/voltage`` and ``/clock`` (lockstep).
+
+Log times.  Stamped messages (JointState, Clock) are logged at their header stamp, so a
+lockstep run is logged in sim time and the same run twice gives the same data.
+``Float64`` has no stamp: in lockstep each command answers exactly one measurement, so
+the k-th voltage is logged at the stamp of the k-th ``joint_states`` (deterministic,
+whatever the arrival order at the recorder); in realtime it is logged at its arrival
+time on the recorder's clock.
+
+Run parameters (documented choice): the recorder *queries* the other nodes'
+parameters through their standard parameter services (``nodes`` parameter: the node
+names in the same namespace) as soon as they answer, and writes one MCAP metadata
+record per node (``params:<node>``, values as strings) immediately — so the record
+survives even a SIGKILL of the recorder.  Runtime changes arrive on
+``/parameter_events`` and are written at the end as ``parameter_changes``
+(``<sim ns>:<node>.<param>`` → new value).  A ``run`` record states timing, counts and
+the topics.
+
+Shutdown: on SIGINT/SIGTERM the node keeps taking messages until the graph has been
+quiet for ``drain_time``, then closes the file (summary and index written), so no
+received message is lost.  After a SIGKILL the file is readable up to its last
+complete chunk (``chunk_size`` bounds the loss).
+"""
+from __future__ import annotations
+
+import collections
+import struct
+import time
+from pathlib import Path
+from typing import Any
+
+from rcl_interfaces.msg import ParameterEvent
+from rclpy.parameter import parameter_value_to_python
+from rclpy.parameter_client import AsyncParameterClient
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+from motor_comp.errors import InputFileError
+from motor_comp.logs import McapRecorder
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, EVENTS_QOS, Param, ParamNode, \
+    RECORD_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, Timing, \
+    run_node
+
+PARAMS = (
+    Param('output', 'run.mcap', 'MCAP file to write (parent directory must exist)',
+          read_only=True),
+    Param('timing', 'lockstep', 'Timing mode (how voltages are time-stamped)',
+          choices=('lockstep', 'realtime'), read_only=True),
+    Param('record_clock', True, 'Also record /clock', read_only=True),
+    Param('chunk_size', 262144, 'MCAP chunk size: the most a SIGKILL can lose', 'bytes',
+          1024, 64 * 1024 * 1024, read_only=True),
+    Param('drain_time', 0.3, 'On shutdown, stop after the topics were quiet this long', 's',
+          0.0, 10.0),
+    Param('match_timeout', 10.0, 'Wait this long for publishers on reference/voltage/clock '
+          'before subscribing joint_states anyway', 's', 0.0, 600.0, read_only=True),
+    Param('nodes', 'plant_node,trajectory_node,controller_node',
+          'Comma-separated node names (same namespace) whose parameters are stored as '
+          'MCAP metadata', read_only=True),
+)
+
+_STAMP = struct.Struct('<iI')   # header.stamp (sec, nanosec) right after the CDR header
+
+
+def cdr_stamp_ns(data: bytes) -> int:
+    """Return the leading ``builtin_interfaces/Time`` of a CDR message (JointState, Clock) [ns].
+
+    Both types start with a Time (``header.stamp`` / ``clock``): after the 4-byte
+    encapsulation header, int32 sec and uint32 nanosec, little-endian for CDR_LE.
+    """
+    if len(data) < 12:
+        raise ValueError('message shorter than its stamp')
+    fmt = _STAMP if data[1] == 1 else struct.Struct('>iI')   # 0x0001 = CDR_LE
+    sec, nsec = fmt.unpack_from(data, 4)
+    return sec * 1_000_000_000 + nsec
+
+
+class RecorderNode(ParamNode):
+    """Writes every received message of the axis topics to one MCAP file."""
+
+    def __init__(self) -> None:
+        super().__init__('recorder_node', namespace=DEFAULT_NAMESPACE)
+        self.declare_params(PARAMS)
+        self.timing = Timing(self.p['timing'])
+        out = Path(self.p['output'])
+        if not out.parent.is_dir():
+            raise InputFileError(f'output: directory {out.parent} does not exist')
+        self.path = out
+        self.writer = McapRecorder(out, chunk_size=self.p['chunk_size'])
+        ns = self.get_namespace().rstrip('/')
+        self.topics = {'reference': f'{ns}/{TOPIC_REFERENCE}',
+                       'joint_states': f'{ns}/{TOPIC_JOINT_STATES}',
+                       'voltage': f'{ns}/{TOPIC_VOLTAGE}', 'clock': TOPIC_CLOCK}
+        self.counts = collections.Counter()
+        self._js_stamps: collections.deque[int] = collections.deque()
+        self._pending_voltage: collections.deque[bytes] = collections.deque()
+        self._last_ns = 0
+        self._last_pair_ns = -1
+        self._last_rx = time.monotonic()
+        self._closed = False
+        self._changes: dict[str, str] = {}
+        types = {'reference': JointState, 'joint_states': JointState, 'voltage': Float64,
+                 'clock': Clock}
+        handlers = {'reference': self._on_stamped('reference'),
+                    'joint_states': self._on_joint_states, 'voltage': self._on_voltage,
+                    'clock': self._on_stamped('clock')}
+        if self.timing is Timing.REALTIME or not self.p['record_clock']:
+            del self.topics['clock']   # no /clock in realtime
+        self._subs = {}
+        for key, topic in self.topics.items():
+            self.writer.add_channel(topic, _type_name(types[key]))
+            if key != 'joint_states':
+                self._subs[key] = self.mark_hot(self.create_subscription(
+                    types[key], topic, handlers[key], RECORD_QOS, raw=True))
+        # joint_states last: the plant starts when it sees this reader, and by then the
+        # other topics' writers have matched us, so nothing of the run is missed
+        self._js_args = (types['joint_states'], self.topics['joint_states'],
+                         handlers['joint_states'])
+        self._since = time.monotonic()
+        self._match_timer = self.create_timer(0.05, self._subscribe_joint_states)
+        self.create_subscription(ParameterEvent, '/parameter_events', self._on_event,
+                                 EVENTS_QOS)
+        names = [n.strip() for n in self.p['nodes'].split(',') if n.strip()]
+        self._param_clients = {n: AsyncParameterClient(self, f'{ns}/{n}') for n in names}
+        self._queried: set[str] = set()
+        self._param_timer = self.create_timer(0.2, self._query_parameters)
+        self.get_logger().info(f'recording {", ".join(self.topics.values())} → {out}')
+
+    def _subscribe_joint_states(self) -> None:
+        unmatched = [k for k, sub in self._subs.items() if sub.get_publisher_count() < 1]
+        waited = time.monotonic() - self._since
+        if unmatched and waited < self.p['match_timeout']:
+            return
+        if unmatched:
+            self.get_logger().warning(f'no publisher on {", ".join(unmatched)} after '
+                                      f'{waited:.0f} s: recording without waiting')
+        self._match_timer.cancel()
+        self.mark_hot(self.create_subscription(*self._js_args, RECORD_QOS, raw=True))
+
+    # -- messages --------------------------------------------------------------------
+    def _write(self, key: str, data: bytes, t_ns: int) -> None:
+        self.writer.write_cdr(self.topics[key], data, t_ns, t_ns)
+        self.counts[key] += 1
+        self._last_ns = max(self._last_ns, t_ns)
+        self._last_rx = time.monotonic()
+
+    def _on_stamped(self, key: str):
+        def callback(data: bytes) -> None:
+            self._write(key, data, cdr_stamp_ns(data))
+        return callback
+
+    def _on_joint_states(self, data: bytes) -> None:
+        t_ns = cdr_stamp_ns(data)
+        self._write('joint_states', data, t_ns)
+        # only the loop's own, advancing stamps pair with commands: a stray message
+        # (e.g. injected by hand) is recorded but cannot shift the pairing
+        if self.timing is Timing.LOCKSTEP and t_ns > self._last_pair_ns:
+            self._last_pair_ns = t_ns
+            if self._pending_voltage:   # its command overtook it on the way here
+                self._write('voltage', self._pending_voltage.popleft(), t_ns)
+            else:
+                self._js_stamps.append(t_ns)
+
+    def _on_voltage(self, data: bytes) -> None:
+        if self.timing is Timing.REALTIME:
+            self._write('voltage', data, self.get_clock().now().nanoseconds)
+        elif self._js_stamps:
+            self._write('voltage', data, self._js_stamps.popleft())
+        else:
+            self._pending_voltage.append(data)
+
+    # -- run parameters --------------------------------------------------------------
+    def _query_parameters(self) -> None:
+        for name, client in self._param_clients.items():
+            if name in self._queried or not client.services_are_ready():
+                continue
+            self._queried.add(name)
+            client.list_parameters(callback=lambda fut, n=name: self._on_list(n, fut))
+        if len(self._queried) == len(self._param_clients):
+            self._param_timer.cancel()
+
+    def _on_list(self, name: str, future: Any) -> None:
+        names = list(future.result().result.names)
+        self._param_clients[name].get_parameters(
+            names, callback=lambda fut: self._on_values(name, names, fut))
+
+    def _on_values(self, name: str, names: list[str], future: Any) -> None:
+        if self._closed:
+            return
+        values = future.result().values
+        data = {n: str(parameter_value_to_python(v)) for n, v in zip(names, values)}
+        self.writer.add_metadata(f'params:{name}', data)
+        self.get_logger().info(f'stored {len(data)} parameters of {name}')
+
+    def _on_event(self, msg: ParameterEvent) -> None:
+        node = msg.node.rsplit('/', 1)[-1]
+        if node not in self._param_clients:
+            return
+        for p in msg.changed_parameters:   # new_parameters = declarations at start
+            key = f'{self._last_ns}:{node}.{p.name}'
+            self._changes[key] = str(parameter_value_to_python(p.value))
+
+    # -- shutdown --------------------------------------------------------------------
+    def finish(self, executor: Any) -> None:
+        """Drain what is still arriving, write the run metadata, close the file."""
+        if self._closed:
+            return
+        deadline = time.monotonic() + 10.0
+        self._last_rx = time.monotonic()
+        while (executor is not None and time.monotonic() - self._last_rx < self.p['drain_time']
+               and time.monotonic() < deadline):
+            executor.spin_once(timeout_sec=0.02)
+        # a command without its measurement (should not happen): keep it, at the last time
+        while self._pending_voltage:
+            self._write('voltage', self._pending_voltage.popleft(), self._last_ns)
+        if self._changes:
+            self.writer.add_metadata('parameter_changes', dict(self._changes))
+        self.writer.add_metadata('run', {
+            'timing': self.timing.value, 'recorder': 'motor_comp recorder_node',
+            **{f'count:{self.topics[k]}': str(v) for k, v in self.counts.items()}})
+        self.writer.close()
+        self._closed = True
+        self.get_logger().info(
+            f'closed {self.path}: ' + ', '.join(f'{k} {v}' for k, v in self.counts.items()))
+
+
+def _type_name(cls: type) -> str:
+    """``pkg/msg/Type`` of a generated message class."""
+    module = cls.__module__.split('.')
+    return f'{module[0]}/msg/{cls.__name__}'
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console entry point ``recorder_node``."""
+    return run_node(RecorderNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

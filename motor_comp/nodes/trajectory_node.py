@@ -1,0 +1,148 @@
+"""``trajectory_node``: publishes the desired motion on ``<ns>/reference``.
+
+A thin adapter over :mod:`motor_comp.control.trajectories` (``Trajectory.at`` calls the
+same compiled ``traj_eval`` the in-process simulator uses, so both drivers get
+bit-identical references).  The message is a ``sensor_msgs/JointState`` named
+``['axis']``: ``position`` = desired position [m], ``velocity`` = desired velocity
+[m/s], and ``effort`` = desired *acceleration* [m/s²] — JointState has no acceleration
+field and the adaptive controller's inertial feedforward needs it; carrying it here
+keeps the ROS loop numerically identical to the simulator.
+
+Lockstep: one reference per ``/clock`` tick, stamped with its time, published one
+control period ahead (on tick k the reference of tick k+1; both at tick 0).  Realtime: a
+wall-clock timer at ``control_rate``; trajectory time starts at the stamp of the plant's
+first measurement (the start point is held until then).
+
+Parameters: ``trajectory`` (``sine | p2p | cv | chirp``) and ``<kind>.<field>`` for
+every field of each trajectory class; changes are validated by building the new
+trajectory (rejected with the reason if invalid) and take effect at the next tick.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Mapping
+
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from motor_comp.control.trajectories import TRAJECTORIES, Trajectory, make_trajectory
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, Param, ParamNode, \
+    SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, TOPIC_REFERENCE, Timing, period_ns, run_node, \
+    set_stamp, stamp_to_ns
+
+#: SI units of the trajectory fields, for the parameter descriptions
+_UNITS = {'amplitude': 'm', 'period': 's', 'offset': 'm', 'distance': 'm', 'move_time': 's',
+          'dwell': 's', 'speeds': 'm/s', 'stroke': 'm', 'acceleration': 'm/s^2',
+          'f_start': 'Hz', 'f_end': 'Hz', 'duration': 's', 'fade': 's'}
+
+
+def _trajectory_params() -> tuple[Param, ...]:
+    """One parameter per field of every trajectory class, named ``<kind>.<field>``."""
+    out = []
+    for kind, cls in TRAJECTORIES.items():
+        for f in dataclasses.fields(cls):
+            default = f.default
+            default = tuple(float(v) for v in default) if isinstance(default, tuple) \
+                else float(default)
+            out.append(Param(f'{kind}.{f.name}', default,
+                             f'{cls.__name__} {f.name.replace("_", " ")}',
+                             _UNITS.get(f.name, ''), -1e6, 1e6))
+    return tuple(out)
+
+
+PARAMS = (
+    Param('trajectory', 'p2p', 'Reference trajectory', choices=tuple(TRAJECTORIES)),
+    Param('timing', 'lockstep', 'Timing mode', choices=('lockstep', 'realtime'),
+          read_only=True),
+    Param('control_rate', 1000.0, 'Realtime publish rate', 'Hz', 1.0, 100_000.0,
+          read_only=True),
+) + _trajectory_params()
+
+
+class TrajectoryNode(ParamNode):
+    """Publishes ``reference`` on each ``/clock`` tick (lockstep) or timer (realtime)."""
+
+    def __init__(self) -> None:
+        super().__init__('trajectory_node', namespace=DEFAULT_NAMESPACE)
+        self.declare_params(PARAMS)
+        self.timing = Timing(self.p['timing'])
+        self.trajectory = self._build(self.p)
+        self.trajectory.at(0.0)   # load the compiled evaluator before the first tick
+        self.dt_ns = period_ns(self.p['control_rate'])
+        self._next_k = -1
+        self._msg = JointState(name=[JOINT_NAME])
+        self._msg.header.frame_id = JOINT_NAME
+        self.pub = self.create_publisher(JointState, TOPIC_REFERENCE, LOOP_QOS)
+        if self.timing is Timing.LOCKSTEP:
+            self.mark_hot(self.create_subscription(Clock, TOPIC_CLOCK, self._on_clock,
+                                                   SUB_QOS))
+        else:
+            # trajectory time starts with the plant's first measurement; until then the
+            # start point r(0) is held so the controller has a reference from the start
+            self._t0_ns: int | None = None
+            self._js_sub = self.create_subscription(JointState, TOPIC_JOINT_STATES,
+                                                    self._on_first_measurement, SUB_QOS)
+            self.mark_hot(self.create_timer(self.dt_ns * 1e-9, self._on_tick))
+        self.get_logger().info(f'{self.timing.value} trajectory {self.trajectory.params()}')
+
+    @staticmethod
+    def _build(values: Mapping[str, Any]) -> Trajectory:
+        kind = values['trajectory']
+        prefix = kind + '.'
+        params = {k[len(prefix):]: v for k, v in values.items() if k.startswith(prefix)}
+        return make_trajectory(kind, **params)
+
+    def apply_params(self, changed: Mapping[str, Any], new: Mapping[str, Any]) -> None:
+        """Rebuild the trajectory (raises ParameterError with the reason if invalid)."""
+        self.trajectory = self._build(new)
+
+    def publish_at(self, t: float, stamp_ns: int) -> None:
+        """Publish the reference at trajectory time ``t`` [s] stamped ``stamp_ns``."""
+        ref = self.trajectory.at(t)
+        msg = self._msg
+        set_stamp(msg.header.stamp, stamp_ns)
+        msg.position = [ref.position]
+        msg.velocity = [ref.velocity]
+        msg.effort = [ref.acceleration]
+        self.pub.publish(msg)
+
+    def _on_clock(self, msg: Clock) -> None:
+        """Publish the reference one period ahead of the tick (and both at t = 0).
+
+        The reference is a known function of time, so publishing r(t_{k+1}) on tick k
+        takes the trajectory node off the loop's critical path (plant → controller →
+        plant): the controller already holds r(t_{k+1}) when measurement k+1 arrives.
+        """
+        t_ns = stamp_to_ns(msg.clock)
+        k, rem = divmod(t_ns, self.dt_ns)
+        if rem:   # not on the control grid (foreign clock): publish for the tick itself
+            self.publish_at(t_ns * 1e-9, t_ns)
+            return
+        if k == 0 or k != self._next_k:
+            self._publish_step(k)
+        self._publish_step(k + 1)
+        self._next_k = k + 1   # the tick expected next
+
+    def _publish_step(self, k: int) -> None:
+        # the simulator evaluates the trajectory at k·T with T = 1/rate: use the same
+        # float (not ns·1e-9, which can differ in the last bit)
+        self.publish_at(k * (1.0 / self.p['control_rate']), k * self.dt_ns)
+
+    def _on_first_measurement(self, msg: JointState) -> None:
+        if self._t0_ns is None:
+            self._t0_ns = stamp_to_ns(msg.header.stamp)
+            self.destroy_subscription(self._js_sub)
+
+    def _on_tick(self) -> None:
+        now = self.get_clock().now().nanoseconds
+        t = 0.0 if self._t0_ns is None else max(0.0, (now - self._t0_ns) * 1e-9)
+        self.publish_at(t, now)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console entry point ``trajectory_node``."""
+    return run_node(TrajectoryNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

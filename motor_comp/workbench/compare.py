@@ -1,0 +1,268 @@
+"""How well does a model explain a measured run?  In force and in position.
+
+* Force: the inverse-model residual (:mod:`.residual`), as NRMSE and fit %
+  (``100·(1 − NRMSE)``, the MATLAB ``compare`` convention).
+* Position, k-step prediction: from the measured state at many origins, the model is
+  simulated ``horizon`` seconds ahead with the *measured* input by the compiled plant
+  kernel (:func:`motor_comp.physics.kernel.plant_advance`, the same law as the
+  simulator), and the predicted position is compared with the measurement.  This works
+  for closed-loop runs, where an open-loop simulation would drift away (an integrating
+  plant with friction), and it shows the error in micrometres.  Fit % is computed on the
+  displacement over the horizon (the position itself would give a meaningless ~100 %).
+* Position, closed-loop replay: when the run was produced by this project's
+  simulator (its metadata names the plant, controller and trajectory), the same loop is
+  re-run with the model as plant and the tracking errors are compared.
+"""
+from __future__ import annotations
+
+import ast
+import dataclasses
+from typing import Any, Mapping
+
+import numpy as np
+from numba import njit
+
+from motor_comp.errors import MotorCompError
+from motor_comp.logs.run import Run
+from motor_comp.physics import kernel as K
+from motor_comp.physics.axis import AxisModel
+from motor_comp.physics.plant import Sensors, initial_state, pack_params
+from motor_comp.workbench.derivatives import Kinematics
+from motor_comp.workbench.residual import Residual, residual
+
+
+@dataclasses.dataclass(frozen=True)
+class Prediction:
+    """k-step-ahead position prediction along a run.
+
+    Parameters
+    ----------
+    horizon : float
+        Prediction horizon [s].
+    t : ndarray
+        Times of the predicted samples [s].
+    predicted, measured : ndarray
+        Positions [m] at those times.
+    rms_error, max_error : float
+        Prediction error [m].
+    fit_percent : float
+        ``100·(1 − ‖y − ŷ‖/‖Δy − mean Δy‖)`` on the displacement over the horizon.
+    """
+
+    horizon: float
+    t: np.ndarray
+    predicted: np.ndarray
+    measured: np.ndarray
+    rms_error: float
+    max_error: float
+    fit_percent: float
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        return {'horizon': self.horizon, 'rms_error': self.rms_error,
+                'max_error': self.max_error, 'fit_percent': self.fit_percent,
+                'n_predictions': int(len(self.t))}
+
+
+@dataclasses.dataclass(frozen=True)
+class Replay:
+    """Closed-loop replay of a simulated run with another plant model."""
+
+    rms_difference: float     #: RMS(x_model − x_measured) [m]
+    rms_error_measured: float  #: RMS tracking error of the run [m]
+    rms_error_model: float    #: RMS tracking error of the replay [m]
+    t: np.ndarray
+    position: np.ndarray
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        return {'rms_difference': self.rms_difference,
+                'rms_error_measured': self.rms_error_measured,
+                'rms_error_model': self.rms_error_model}
+
+
+@dataclasses.dataclass(frozen=True)
+class Comparison:
+    """Model against measurement: force residual, prediction, optional replay."""
+
+    model: AxisModel
+    kin: Kinematics
+    residual: Residual
+    force_nrmse: float
+    prediction: Prediction
+    replay: Replay | None
+    replay_note: str
+
+    @property
+    def force_fit_percent(self) -> float:
+        """``100·(1 − force NRMSE)``."""
+        return 100.0 * (1.0 - self.force_nrmse)
+
+    def summary(self) -> str:
+        """Plain text for the terminal."""
+        p = self.prediction
+        res = self.residual
+        m = res.mask
+        lines = [
+            f'run {self.kin.name}: {len(self.kin)} samples at {1 / self.kin.dt:.0f} Hz'
+            + (' (resampled from irregular stamps)' if self.kin.resampled else ''),
+            f'force: NRMSE {100 * self.force_nrmse:.1f} % (fit {self.force_fit_percent:.1f} %),'
+            f' RMS residual {np.sqrt(np.mean(res.r[m] ** 2)):.3g} N of RMS drive force '
+            f'{np.std(res.f_in[m]):.3g} N',
+            f'position, {1e3 * p.horizon:.0f} ms-ahead prediction: RMS error '
+            f'{1e6 * p.rms_error:.2f} µm, max {1e6 * p.max_error:.2f} µm '
+            f'(fit {p.fit_percent:.1f} % of the displacement)',
+        ]
+        if self.replay is not None:
+            r = self.replay
+            lines.append(f'closed-loop replay: RMS position difference '
+                         f'{1e6 * r.rms_difference:.2f} µm; tracking error RMS measured '
+                         f'{1e6 * r.rms_error_measured:.2f} µm vs model '
+                         f'{1e6 * r.rms_error_model:.2f} µm')
+        else:
+            lines.append(f'closed-loop replay: {self.replay_note}')
+        return '\n'.join(lines)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        res = self.residual
+        m = res.mask
+        return {
+            'run': self.kin.name,
+            'force_nrmse': float(self.force_nrmse),
+            'force_fit_percent': float(self.force_fit_percent),
+            'rms_residual': float(np.sqrt(np.mean(res.r[m] ** 2))),
+            'prediction': self.prediction.as_dict(),
+            'replay': self.replay.as_dict() if self.replay is not None else None,
+            'replay_note': self.replay_note,
+            'model': self.model.to_dict(),
+        }
+
+
+@njit(cache=True)
+def _kstep(P, S0, xm, xl, vm, u, origins, horizon, n_sub):
+    # every origin restarts the kernel from the measured state and runs it `horizon`
+    # control periods on the logged input; the dead-time buffer is filled with the
+    # commands held before the origin so a delayed model sees the right past
+    n = origins.shape[0]
+    out = np.empty(n)
+    nbuf = S0.shape[0] - K.S_DBUF
+    for j in range(n):
+        k0 = origins[j]
+        S = S0.copy()
+        S[K.S_X] = xm[k0]
+        S[K.S_XL] = xl[k0]
+        S[K.S_V] = vm[k0]
+        S[K.S_STUCK] = 1.0 if vm[k0] == 0.0 else 0.0
+        if nbuf > 0:
+            S[K.S_DHEAD] = 0.0
+            for m in range(1, nbuf + 1):
+                kk = k0 - 1 - (m - 1) // n_sub
+                S[K.S_DBUF + (1 - m) % nbuf] = u[max(kk, 0)]
+        for i in range(horizon):
+            K.plant_advance(P, S, u[k0 + i], 0.0, n_sub)
+        out[j] = S[K.S_XL]
+    return out
+
+
+def predict(kin: Kinematics, model: AxisModel, res: Residual | None = None, *,
+            horizon: float = 0.02, n_sub: int = 10, max_origins: int = 5000) -> Prediction:
+    """k-step-ahead position prediction (see module docstring).
+
+    Parameters
+    ----------
+    horizon : float
+        Prediction horizon [s] (rounded to whole samples, at least one).
+    n_sub : int
+        Physics steps per sample.
+    max_origins : int
+        Upper bound on the number of prediction origins (evenly spread).
+    """
+    res = res if res is not None else residual(kin, model)
+    h = max(1, int(round(horizon / kin.dt)))
+    n = len(kin)
+    lo, hi = kin.window, n - h - kin.window
+    if hi <= lo:
+        raise MotorCompError(f'{kin.name}: run too short for a {horizon:g} s prediction')
+    step = max(1, (hi - lo) // max_origins)
+    origins = np.arange(lo, hi, step, dtype=np.int64)
+    # explicit RK4 needs the physics step well inside the fastest mechanical time
+    # constant M/(damping terms): a light, heavily damped model gets more sub-steps
+    damp = (model.input_gain * model.back_emf + model.damping + model.fv
+            + (abs(model.get('asymmetry').dfv) if model.has('asymmetry') else 0.0))
+    n_sub = int(min(max(n_sub, np.ceil(kin.dt * damp / model.mass / 0.5)), 5000))
+    P = pack_params(model, Sensors(encoder_resolution=0.0), kin.dt / n_sub)
+    S0 = initial_state(P, 0.0)
+    pred = _kstep(P, S0, np.ascontiguousarray(res.x), np.ascontiguousarray(kin.x),
+                  np.ascontiguousarray(res.v), np.ascontiguousarray(kin.u, dtype=float),
+                  origins, h, n_sub)
+    meas = kin.position[origins + h]
+    err = meas - pred
+    disp = meas - kin.position[origins]
+    den = float(np.linalg.norm(disp - disp.mean()))
+    fit = 100.0 * (1.0 - float(np.linalg.norm(err)) / den) if den > 0 else float('nan')
+    return Prediction(horizon=h * kin.dt, t=kin.t[origins + h], predicted=pred, measured=meas,
+                      rms_error=float(np.sqrt(np.mean(err ** 2))),
+                      max_error=float(np.max(np.abs(err))), fit_percent=fit)
+
+
+def _literal(text: Any) -> Any:
+    if not isinstance(text, str):
+        return text
+    try:
+        return ast.literal_eval(text)
+    except (ValueError, SyntaxError):
+        return text
+
+
+def replay(run: Run, model: AxisModel) -> tuple[Replay | None, str]:
+    """Re-run the closed loop recorded in ``run``'s metadata with ``model`` as the plant.
+
+    Returns ``(None, reason)`` when the run does not say how it was produced.
+    """
+    meta: Mapping[str, Any] = run.metadata or {}
+    needed = ('plant', 'controller', 'trajectory')
+    missing = [k for k in needed if k not in meta]
+    if missing:
+        return None, f'not available (run metadata lacks {", ".join(missing)})'
+    try:
+        from motor_comp.control import simulator as sim_mod
+        from motor_comp.control.controller import default_params, make_controller, \
+            ControlMode
+        from motor_comp.control.trajectories import trajectory_from_dict
+        from motor_comp.physics.config import load_plant
+    except ImportError as exc:
+        return None, f'not available (control package: {exc})'
+    try:
+        cfg = load_plant(str(meta['plant'])).with_model(model)
+        mode = ControlMode.parse(str(meta['controller']))
+        names = set(default_params(mode, cfg).as_dict())
+        params = {k: _literal(meta[k]) for k in names if k in meta}
+        ctrl = make_controller(mode, plant=cfg, feedforward=str(meta.get('feedforward',
+                                                                          'none')), **params)
+        traj = trajectory_from_dict(dict(_literal(meta['trajectory'])))
+        duration = len(run) / float(_literal(meta.get('control_rate_hz', 1.0 / np.median(
+            np.diff(run.t)))))
+        out = sim_mod.simulate(cfg, ctrl, traj, duration=duration,
+                               seed=int(_literal(meta.get('seed', 0))))
+    except (MotorCompError, ValueError, TypeError, KeyError) as exc:
+        return None, f'not available ({exc})'
+    n = min(len(out.t), len(run))
+    x_meas = run.position[:n]
+    x_mod = out.position[:n]
+    ref = run.reference[:n] if run.reference is not None else out.reference[:n]
+    rep = Replay(rms_difference=float(np.sqrt(np.mean((x_mod - x_meas) ** 2))),
+                 rms_error_measured=float(np.sqrt(np.mean((ref - x_meas) ** 2))),
+                 rms_error_model=float(np.sqrt(np.mean((out.reference[:n] - x_mod) ** 2))),
+                 t=run.t[:n], position=x_mod)
+    return rep, 'ok'
+
+
+def compare(run: Run, kin: Kinematics, model: AxisModel, *, horizon: float = 0.02,
+            closed_loop: bool = True) -> Comparison:
+    """Compare ``model`` with the run in force and position (see module docstring)."""
+    res = residual(kin, model)
+    pred = predict(kin, model, res, horizon=horizon)
+    rep, note = replay(run, model) if closed_loop else (None, 'not requested')
+    return Comparison(model=model, kin=kin, residual=res, force_nrmse=res.nrmse(),
+                      prediction=pred, replay=rep, replay_note=note)

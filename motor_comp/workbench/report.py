@@ -1,0 +1,286 @@
+"""Where does the model fail?  Residual views, whiteness test, PNG figures and one HTML page.
+
+Views of the force residual ``r`` (sliding samples only):
+
+* over time, next to the drive force for scale;
+* against position, with its spatial spectrum (a peak names a ripple period);
+* against velocity, binned (the friction curve the model misses);
+* against time since each reversal (pre-sliding, backlash, quadrant glitches);
+* whiteness, as MATLAB ``resid``: autocorrelation of ``r`` and cross-correlation with
+  the input, with a 99 % band ``±2.58/√N_eff`` for a white residual.  The residual is
+  smoothed by the derivative filter, so it is decimated to one sample per half window
+  before the test (``N_eff`` is the decimated length) — otherwise the filter's own
+  correlation would fail every model.
+"""
+from __future__ import annotations
+
+import dataclasses
+import html
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from motor_comp.errors import MotorCompError
+from motor_comp.workbench.candidates import spatial_spectrum
+from motor_comp.workbench.derivatives import Kinematics
+from motor_comp.workbench.residual import Residual, reversals
+
+#: 99 % two-sided normal quantile of the whiteness band
+Z99 = 2.576
+
+
+@dataclasses.dataclass(frozen=True)
+class Whiteness:
+    """Residual correlation test (MATLAB ``resid`` style).
+
+    Parameters
+    ----------
+    lags : ndarray
+        Lags [s].
+    autocorr, crosscorr : ndarray
+        Normalised autocorrelation of ``r`` and cross-correlation of ``r`` with the input.
+    band : float
+        99 % confidence half-width for a white residual.
+    auto_outside, cross_outside : float
+        Fraction of non-zero lags outside the band.
+    """
+
+    lags: np.ndarray
+    autocorr: np.ndarray
+    crosscorr: np.ndarray
+    band: float
+    auto_outside: float
+    cross_outside: float
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        return {'band': self.band, 'autocorr_outside': self.auto_outside,
+                'crosscorr_outside': self.cross_outside,
+                'white': bool(self.auto_outside <= 0.05),
+                'independent_of_input': bool(self.cross_outside <= 0.05)}
+
+
+def whiteness(kin: Kinematics, res: Residual, *, max_lag_s: float | None = None) \
+        -> Whiteness:
+    """Auto- and cross-correlation of the (decimated) residual with a 99 % band."""
+    step = max(1, kin.window // 2)
+    m = res.mask[::step]
+    r = res.r[::step][m]
+    u = kin.u[::step][m]
+    r = r - r.mean()
+    u = u - u.mean()
+    n = len(r)
+    if n < 20:
+        raise MotorCompError(f'{kin.name}: too few sliding samples for a whiteness test')
+    # 25 lags as MATLAB resid's default, unless a span [s] is asked for
+    max_lag = 25 if max_lag_s is None else int(max_lag_s / (step * kin.dt))
+    max_lag = int(np.clip(max_lag, 5, n // 4))
+    nfft = 1 << int(np.ceil(np.log2(2 * n)))
+    fr = np.fft.rfft(r, nfft)
+    fu = np.fft.rfft(u, nfft)
+    acf = np.fft.irfft(fr * np.conj(fr), nfft)
+    ccf = np.fft.irfft(fr * np.conj(fu), nfft)
+    norm_a = acf[0] if acf[0] > 0 else 1.0
+    norm_c = np.sqrt(acf[0] * np.sum(u * u)) or 1.0
+    lags = np.arange(-max_lag, max_lag + 1)
+    ac = acf[np.abs(lags)] / norm_a
+    cc = ccf[lags % nfft] / norm_c
+    band = Z99 / np.sqrt(n)
+    nz = lags != 0
+    return Whiteness(lags=lags * step * kin.dt, autocorr=ac, crosscorr=cc, band=band,
+                     auto_outside=float(np.mean(np.abs(ac[nz]) > band)),
+                     cross_outside=float(np.mean(np.abs(cc) > band)))
+
+
+def binned(xv: np.ndarray, yv: np.ndarray, bins: int = 40) \
+        -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bin centres, means and standard deviations of ``yv`` in equal bins of ``xv``."""
+    edges = np.linspace(np.min(xv), np.max(xv), bins + 1)
+    idx = np.clip(np.digitize(xv, edges) - 1, 0, bins - 1)
+    cnt = np.bincount(idx, minlength=bins)
+    s1 = np.bincount(idx, weights=yv, minlength=bins)
+    s2 = np.bincount(idx, weights=yv * yv, minlength=bins)
+    ok = cnt > 0
+    mean = np.where(ok, s1 / np.maximum(cnt, 1), np.nan)
+    std = np.sqrt(np.maximum(np.where(ok, s2 / np.maximum(cnt, 1), np.nan) - mean ** 2, 0))
+    return 0.5 * (edges[1:] + edges[:-1]), mean, std
+
+
+def since_reversal(kin: Kinematics, res: Residual, *, window_s: float = 0.2) \
+        -> tuple[np.ndarray, np.ndarray, int]:
+    """Mean |residual| [N] against time since the last reversal (sign of motion)."""
+    q = max(3 * kin.noise_std(), 1e-9)
+    rev = reversals(kin.x, max(10 * q, 1e-3 * float(np.ptp(kin.x))))
+    n = max(2, int(round(window_s / kin.dt)))
+    acc = np.zeros(n)
+    cnt = np.zeros(n)
+    for k, _ in rev:
+        seg = res.r[k:k + n]
+        acc[:len(seg)] += np.abs(seg)
+        cnt[:len(seg)] += 1
+    mean = np.where(cnt > 0, acc / np.maximum(cnt, 1), np.nan)
+    return np.arange(n) * kin.dt, mean, len(rev)
+
+
+def _plt():
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def residual_figures(out: Path, kin: Kinematics, res: Residual, *, label: str = '') \
+        -> list[tuple[str, str]]:
+    """Write the residual views as PNGs in ``out``; return ``(file, caption)`` pairs."""
+    plt = _plt()
+    m = res.mask
+    figs: list[tuple[str, str]] = []
+    t = kin.t - kin.t[0]
+
+    fig, ax = plt.subplots(figsize=(8, 3.2), dpi=90)
+    ax.plot(t, res.f_in, color='0.75', lw=0.6, label='drive force F_in')
+    r_plot = np.where(m, res.r, np.nan)
+    ax.plot(t, r_plot, color='C3', lw=0.7, label='residual r')
+    ax.set_xlabel('time [s]')
+    ax.set_ylabel('force [N]')
+    ax.set_title(f'Force residual over time {label}')
+    ax.legend(loc='upper right', fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / 'residual_time.png')
+    plt.close(fig)
+    figs.append(('residual_time.png', 'Residual over time, with the drive force for scale '
+                 '(gaps: axis at rest, excluded).'))
+
+    spec = spatial_spectrum(res.x[m], res.r[m])
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.2), dpi=90)
+    c, mu, _ = binned(res.x[m], res.r[m], bins=200)
+    a1.plot(1e3 * res.x[m][::5], res.r[m][::5], '.', ms=1, color='0.6')
+    a1.plot(1e3 * c, mu, color='C3', lw=1.2, label='mean per position bin')
+    a1.set_xlabel('position [mm]')
+    a1.set_ylabel('residual [N]')
+    a1.set_title('Residual vs position')
+    a1.legend(fontsize=8)
+    f = spec.frequency[1:]
+    keep = f <= 1.0 / (4 * spec.bin_width)
+    a2.semilogx(1e3 / f[keep], spec.amplitude[1:][keep], color='C0')
+    i = int(np.argmax(spec.amplitude[1:][keep]))
+    p = 1.0 / f[keep][i]
+    a2.axvline(1e3 * p, color='C3', ls='--', lw=0.8)
+    a2.annotate(f'{1e3 * p:.3g} mm', (1e3 * p, spec.amplitude[1:][keep][i]),
+                textcoords='offset points', xytext=(5, -10), fontsize=8, color='C3')
+    a2.set_xlabel('spatial period [mm]')
+    a2.set_ylabel('amplitude [N]')
+    a2.set_title('Spatial spectrum of the residual')
+    fig.tight_layout()
+    fig.savefig(out / 'residual_position.png')
+    plt.close(fig)
+    figs.append(('residual_position.png', 'Residual against position and its spatial '
+                 'spectrum: a peak names a ripple/cogging period; a slope is a spring.'))
+
+    fig, ax = plt.subplots(figsize=(6, 3.2), dpi=90)
+    vmax = float(np.percentile(np.abs(res.v[m]), 99))
+    sel = m & (np.abs(res.v) <= vmax)
+    c, mu, sd = binned(res.v[sel], res.r[sel], bins=60)
+    ax.plot(1e3 * res.v[sel][::5], res.r[sel][::5], '.', ms=1, color='0.6')
+    ax.fill_between(1e3 * c, mu - sd, mu + sd, color='C3', alpha=0.2)
+    ax.plot(1e3 * c, mu, color='C3', lw=1.2)
+    ax.axhline(0, color='k', lw=0.5)
+    ax.set_xlabel('velocity [mm/s]')
+    ax.set_ylabel('residual [N]')
+    ax.set_title('Residual vs velocity (missing friction curve)')
+    fig.tight_layout()
+    fig.savefig(out / 'residual_velocity.png')
+    plt.close(fig)
+    figs.append(('residual_velocity.png', 'Residual against velocity, mean ± std per bin: '
+                 'a step at 0 is Coulomb, a slope viscous, a hump near 0 Stribeck, '
+                 'a V shape asymmetry, a constant an offset.'))
+
+    ts, mean, nrev = since_reversal(kin, res)
+    fig, ax = plt.subplots(figsize=(6, 3.2), dpi=90)
+    ax.plot(1e3 * ts, mean, color='C3')
+    ax.set_xlabel('time since reversal [ms]')
+    ax.set_ylabel('mean |residual| [N]')
+    ax.set_title(f'Residual after reversals ({nrev} reversals)')
+    fig.tight_layout()
+    fig.savefig(out / 'residual_reversal.png')
+    plt.close(fig)
+    figs.append(('residual_reversal.png', 'Mean |residual| against time since each '
+                 'reversal: a burst right after reversing is pre-sliding or backlash.'))
+
+    w = whiteness(kin, res)
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.2), dpi=90)
+    for a, y, title in ((a1, w.autocorr, 'Autocorrelation of r'),
+                        (a2, w.crosscorr, 'Cross-correlation r × input')):
+        a.vlines(1e3 * w.lags, 0, y, color='C0', lw=0.8)
+        a.axhspan(-w.band, w.band, color='C2', alpha=0.2, label='99 % band (white)')
+        a.set_xlabel('lag [ms]')
+        a.set_title(title)
+        a.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / 'residual_whiteness.png')
+    plt.close(fig)
+    figs.append(('residual_whiteness.png', f'Whiteness test: {100 * w.auto_outside:.0f} % '
+                 f'of autocorrelation lags and {100 * w.cross_outside:.0f} % of '
+                 'cross-correlation lags fall outside the 99 % band (a good model leaves '
+                 'at most a few %).'))
+    return figs
+
+
+def prediction_figure(out: Path, kin: Kinematics, prediction: Any) -> tuple[str, str]:
+    """k-step prediction error over time."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(8, 3.0), dpi=90)
+    t = prediction.t - kin.t[0]
+    ax.plot(t, 1e6 * (prediction.measured - prediction.predicted), color='C0', lw=0.7)
+    ax.set_xlabel('time [s]')
+    ax.set_ylabel('error [µm]')
+    ax.set_title(f'{1e3 * prediction.horizon:.0f} ms-ahead position prediction error')
+    fig.tight_layout()
+    fig.savefig(out / 'prediction.png')
+    plt.close(fig)
+    return ('prediction.png', 'Measured minus predicted position, predicted from the '
+            'measured state with the measured input.')
+
+
+def candidates_figure(out: Path, candidates: Sequence[Any]) -> tuple[str, str]:
+    """Bar chart of the held-out explained fraction per candidate."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 3.2), dpi=90)
+    names = [c.effect for c in candidates]
+    vals = [100 * max(c.explained, -0.05) for c in candidates]
+    colors = ['C2' if c.supported else '0.6' for c in candidates]
+    ax.barh(names[::-1], vals[::-1], color=colors[::-1])
+    ax.set_xlabel('held-out residual removed [%]')
+    ax.set_title('Candidate effects (green: supported)')
+    fig.tight_layout()
+    fig.savefig(out / 'candidates.png')
+    plt.close(fig)
+    return ('candidates.png', 'Fraction of the residual each candidate removes on held-out '
+            'time blocks.')
+
+
+def write_html(out: Path, title: str, text: str, figures: Sequence[tuple[str, str]]) -> Path:
+    """One self-contained HTML page (text summary + the PNGs next to it)."""
+    parts = [f'<!DOCTYPE html><html><head><meta charset="utf-8"><title>{html.escape(title)}'
+             '</title><style>body{font-family:sans-serif;max-width:60em;margin:1em auto}'
+             'pre{background:#f4f4f4;padding:.6em}img{max-width:100%}</style></head><body>',
+             f'<h1>{html.escape(title)}</h1>', f'<pre>{html.escape(text)}</pre>']
+    for name, caption in figures:
+        parts.append(f'<figure><img src="{html.escape(name)}" alt="{html.escape(caption)}">'
+                     f'<figcaption>{html.escape(caption)}</figcaption></figure>')
+    parts.append('</body></html>')
+    path = out / 'index.html'
+    path.write_text('\n'.join(parts), encoding='utf-8')
+    return path
+
+
+def prepare_dir(path: str | Path) -> Path:
+    """Create the report directory (one-line error if it cannot be)."""
+    out = Path(path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise MotorCompError(f'{out}: cannot create report directory ({exc.strerror})') \
+            from None
+    return out

@@ -1,0 +1,257 @@
+"""The inverse model: the force a model leaves unexplained along a measured run.
+
+``r(t) = S[F_in(u(t − τ), ẋ_m)] − M·ẍ_m − S[Σ_k F_k(x_m, ẋ_m)]`` (DESIGN.md §3 and §6),
+where ``S`` is the zero-phase smoothing of :mod:`~motor_comp.workbench.derivatives`,
+``τ`` the model's ``delay`` and ``x_m`` the motor position — the measured (load)
+position, or with ``backlash`` the motor position reconstructed from it.  Each force
+comes from the effect modules' own laws via :meth:`AxisModel.input_force` and
+:meth:`AxisModel.effect_forces` (one implementation of each law).
+
+Samples where the axis is (nearly) at rest are left out of every fit and figure: the
+friction force of a stuck axis is whatever balances the drive, so no sliding model can
+or should explain it (see the identifiability notes in docs/tutorial.md).
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from numba import njit
+
+from motor_comp.physics import kernel as K
+from motor_comp.physics.axis import AxisModel
+from motor_comp.physics.plant import Sensors, initial_state, pack_params
+from motor_comp.workbench.derivatives import Kinematics
+
+
+@dataclasses.dataclass(frozen=True)
+class Residual:
+    """Force balance of a model along a run (all forces smoothed, [N]).
+
+    Parameters
+    ----------
+    f_in : ndarray
+        Drive force ``input_gain·(u − back_emf·ẋ) − damping·ẋ`` [N].
+    inertia : ndarray
+        ``M·ẍ_m`` [N].
+    forces : dict[str, ndarray]
+        Force of each effect [N].
+    r : ndarray
+        Residual force [N].
+    x, v, a : ndarray
+        Motor kinematics used (differs from the measurement only with backlash).
+    mask : ndarray of bool
+        Samples in sliding motion (used for fits and figures).
+    """
+
+    f_in: np.ndarray
+    inertia: np.ndarray
+    forces: dict
+    r: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    mask: np.ndarray
+
+    def nrmse(self, mask: np.ndarray | None = None) -> float:
+        """RMS(r) / RMS(F_in − mean) over ``mask`` (default: the sliding samples)."""
+        m = self.mask if mask is None else mask
+        return force_nrmse(self.r[m], self.f_in[m])
+
+
+def force_nrmse(r: np.ndarray, f_in: np.ndarray) -> float:
+    """``RMS(r)/RMS(F_in − mean(F_in))`` (DESIGN.md §6 ``force_nrmse``)."""
+    den = float(np.sqrt(np.mean((f_in - np.mean(f_in)) ** 2)))
+    num = float(np.sqrt(np.mean(r ** 2)))
+    return num / den if den > 0 else float('inf')
+
+
+def sliding_mask(kin: Kinematics) -> np.ndarray:
+    """Samples where the axis slides: |ẋ| above five times its estimation noise.
+
+    The velocity noise of the Savitzky–Golay derivative is estimated from the position
+    noise (or the encoder quantum when the noise is below it) and the filter's own
+    noise gain, so the threshold adapts to the sensor and the sample rate.
+    """
+    coeff_noise = np.sqrt(np.sum(_savgol_deriv_coeffs(kin.window, kin.polyorder) ** 2))
+    steps = np.abs(np.diff(kin.position))
+    nz = steps[steps > 0]
+    quantum = float(np.min(nz)) if nz.size else 0.0
+    sigma_x = max(kin.noise_std(), quantum / np.sqrt(12.0))
+    v_min = 5.0 * sigma_x * coeff_noise / kin.dt
+    # never below 0.2 % of the peak speed: sign(v) of a near-stopped axis is arbitrary
+    v_min = max(v_min, 2e-3 * float(np.max(np.abs(kin.v))))
+    m = np.abs(kin.v) > v_min
+    # the filter's transient at both ends of the record is not trusted
+    m[:kin.window] = False
+    m[-kin.window:] = False
+    return m
+
+
+def _savgol_deriv_coeffs(window: int, polyorder: int) -> np.ndarray:
+    from scipy.signal import savgol_coeffs
+    return savgol_coeffs(window, polyorder, deriv=1)
+
+
+def _stationary_runs(pos: np.ndarray, k_ext: int, eps: float) -> tuple[int, int]:
+    """The contiguous samples around ``k_ext`` whose position stays within ``eps``."""
+    ref = pos[k_ext]
+    i0 = k_ext
+    while i0 > 0 and abs(pos[i0 - 1] - ref) <= eps:
+        i0 -= 1
+    i1 = k_ext
+    while i1 < len(pos) - 1 and abs(pos[i1 + 1] - ref) <= eps:
+        i1 += 1
+    return i0, i1
+
+
+def reversals(position: np.ndarray, hysteresis: float) -> list[tuple[int, int]]:
+    """Indices of the direction reversals of a position record.
+
+    A reversal is declared when the position has come back by more than ``hysteresis``
+    [m] from its last extreme (a play operator on the measurement, so encoder flicker
+    does not count).  Returns ``(index of the extreme, new direction ±1)`` pairs.
+    """
+    idx, dirs = _reversals(np.ascontiguousarray(position, dtype=float), float(hysteresis))
+    return [(int(i), int(d)) for i, d in zip(idx, dirs)]
+
+
+@njit(cache=True)
+def _reversals(position, hysteresis):
+    # compiled: this runs inside the backlash width search, once per trial width
+    out_i = []
+    out_d = []
+    direction = 0
+    k_ext = 0
+    k_max = 0
+    k_min = 0
+    for k in range(1, len(position)):
+        p = position[k]
+        if direction == 0:
+            # first motion: whichever way the position first leaves its start band
+            if p > position[k_max]:
+                k_max = k
+            if p < position[k_min]:
+                k_min = k
+            if position[k_max] - p > hysteresis:
+                direction, k_ext = -1, k
+            elif p - position[k_min] > hysteresis:
+                direction, k_ext = 1, k
+            continue
+        if direction > 0:
+            if p > position[k_ext]:
+                k_ext = k
+            elif position[k_ext] - p > hysteresis:
+                out_i.append(k_ext)
+                out_d.append(-1)
+                direction, k_ext = -1, k
+        else:
+            if p < position[k_ext]:
+                k_ext = k
+            elif p - position[k_ext] > hysteresis:
+                out_i.append(k_ext)
+                out_d.append(1)
+                direction, k_ext = 1, k
+    return np.array(out_i, dtype=np.int64), np.array(out_d, dtype=np.int64)
+
+
+def motor_position(kin: Kinematics, width: float, model: AxisModel,
+                   u: np.ndarray) -> np.ndarray:
+    """Motor position [m] reconstructed from the load position across a backlash gap.
+
+    Between reversals the motor pushes one edge of the gap, ``x_m = x_load ± width/2``.
+    At a reversal the (massless, DESIGN.md §3 backlash) load stops when the motor
+    reverses; the motor then flies freely across the gap under the model's own
+    dynamics, ``M·ẍ_m = F_in(u, ẋ_m) − Σ F_k(x_m, ẋ_m)``, until it has travelled the
+    width and takes the load along.  With the right width this flight ends when the
+    measured load starts moving again; with a wrong one it ends early (the load
+    appears stuck under a driving force) or late (the motor jumps when the load is
+    seen moving), and the force residual grows — which is what the width search
+    minimises.
+
+    Parameters
+    ----------
+    width : float
+        Gap [m].
+    model : AxisModel
+        Model without backlash (its forces drive the flight).
+    u : ndarray
+        Input seen by the axis at each sample (delay applied).
+    """
+    pos = kin.position
+    if width <= 0:
+        return pos.copy()
+    dpos = np.abs(np.diff(pos))
+    eps = max(3.0 * kin.noise_std(), 0.5 * float(np.min(dpos[dpos > 0], initial=0.0)))
+    rev = reversals(kin.x, max(width, 4 * eps + 1e-12))
+    side = np.zeros(len(pos))
+    moving = np.abs(kin.v) > 0.05 * np.max(np.abs(kin.v))
+    first = np.sign(kin.v[int(np.argmax(moving))])
+    d_prev = first if first != 0 else 1.0
+    last = 0
+    for k_ext, d_new in rev:
+        side[last:k_ext] = d_prev
+        last = k_ext
+        d_prev = d_new
+    side[last:] = d_prev
+    xm = pos + 0.5 * width * side
+    if not rev:
+        return xm
+    # free flight across each gap, integrated by the compiled plant kernel (the one
+    # implementation of the axis dynamics, stiction included) for the model at hand
+    starts = np.array([k for k, _ in rev], dtype=np.int64)
+    dirs = np.array([d for _, d in rev], dtype=float)
+    ends = np.append(starts[1:], len(pos))
+    i1 = np.array([_stationary_runs(pos, k, eps)[1] for k in starts], dtype=np.int64)
+    horizon = np.minimum(ends - starts, 3 * (i1 - starts) + 2 * kin.window + 5)
+    n_sub = 10
+    P = pack_params(model.without('backlash', 'delay'), Sensors(encoder_resolution=0.0),
+                    kin.dt / n_sub)
+    S0 = initial_state(P, 0.0)
+    _flights(P, S0, xm, pos, np.ascontiguousarray(u, dtype=float), starts, dirs,
+             horizon.astype(np.int64), float(width), n_sub)
+    return xm
+
+
+@njit(cache=True)
+def _flights(P, S0, xm, pos, u, starts, dirs, horizon, width, n_sub):
+    for j in range(starts.shape[0]):
+        k0 = starts[j]
+        S = S0.copy()
+        x_start = pos[k0] - 0.5 * width * dirs[j]
+        S[K.S_X] = x_start
+        S[K.S_XL] = x_start
+        S[K.S_V] = 0.0
+        S[K.S_STUCK] = 1.0
+        for step in range(horizon[j]):
+            k = k0 + step
+            xm[k] = S[K.S_X]
+            # contact with the far edge: the load is taken along from here on
+            if (S[K.S_X] - pos[k0]) * dirs[j] >= 0.5 * width:
+                break
+            K.plant_advance(P, S, u[k], 0.0, n_sub)
+
+
+def residual(kin: Kinematics, model: AxisModel, *, mask: np.ndarray | None = None) \
+        -> Residual:
+    """Force residual of ``model`` along ``kin`` (see module docstring)."""
+    bl = model.get('backlash')
+    dly = model.get('delay')
+    u = kin.input_at(dly.tau if dly is not None else 0.0)
+    if bl is not None and bl.width > 0:
+        # the flight is driven by the held command (what the plant integrates)
+        shift = int(round((dly.tau if dly is not None else 0.0) / kin.dt))
+        u_hold = np.concatenate([np.full(shift, kin.u[0]), kin.u[:len(kin.u) - shift]])
+        x, v, a = kin.derivatives(motor_position(kin, bl.width, model, u_hold))
+    else:
+        x, v, a = kin.x, kin.v, kin.a
+    f_in = kin.smooth(model.input_force(u, v))
+    forces = {name: kin.smooth(f) for name, f in
+              model.effect_forces(x, v, dt=kin.dt).items()}
+    inertia = model.mass * a
+    total = sum(forces.values(), np.zeros(len(kin)))
+    r = f_in - inertia - total
+    if mask is None:
+        mask = sliding_mask(kin)
+    return Residual(f_in=f_in, inertia=inertia, forces=forces, r=r, x=x, v=v, a=a,
+                    mask=mask)

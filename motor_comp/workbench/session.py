@@ -1,0 +1,53 @@
+"""Load what every workbench command needs: a run and a model, with one-line errors.
+
+Runs are MCAP files (DESIGN.md §5 topics) read by :func:`motor_comp.logs.read_run`;
+CSV/MAT tables are turned into MCAP by ``motor-comp import`` first (that is where
+their column names and units are given).
+"""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from motor_comp.errors import InputFileError
+from motor_comp.logs.run import Run
+from motor_comp.physics.axis import AxisModel, InputKind
+from motor_comp.workbench.derivatives import InputHold, Kinematics, kinematics
+
+
+@dataclasses.dataclass(frozen=True)
+class Session:
+    """A run, its kinematics and a model."""
+
+    run: Run
+    kin: Kinematics
+    model: AxisModel
+
+
+def default_hold(model: AxisModel) -> InputHold:
+    """A voltage command is held by the controller; a logged current/force is sampled."""
+    return InputHold.ZOH if model.input is InputKind.VOLTAGE else InputHold.SAMPLE
+
+
+def load_run(path: str | Path) -> Run:
+    """Read an MCAP run (one-line :class:`InputFileError` on any problem)."""
+    path = Path(path)
+    if path.suffix.lower() in ('.csv', '.mat', '.txt'):
+        raise InputFileError(f'{path}: tables are converted first: motor-comp import '
+                             f'{path.name} --time COL --input COL --position COL -o RUN.mcap')
+    from motor_comp.logs import read_run   # heavy (MCAP stack): load only when needed
+    return read_run(path)
+
+
+def open_session(run_path: str | Path, model_path: str | Path, *,
+                 window_s: float = 0.02, hold: str | None = None) -> Session:
+    """Load model and run, check the run has the drive input, compute kinematics."""
+    model = AxisModel.load(model_path)
+    run = load_run(run_path)
+    if run.voltage is None:
+        raise InputFileError(f'{run_path}: no drive input (/axis/voltage) in this run; the '
+                             f'workbench needs the command (or current/force) the model '
+                             f'converts with input_gain')
+    kin = kinematics(run, window_s=window_s,
+                     hold=InputHold(hold) if hold else default_hold(model))
+    return Session(run=run, kin=kin, model=model)

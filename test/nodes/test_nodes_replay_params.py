@@ -1,0 +1,109 @@
+"""``motor-comp replay`` as a live source, and the parameter-spec machinery of the nodes."""
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, strategies as st
+from rcl_interfaces.msg import ParameterType
+from sensor_msgs.msg import JointState
+
+from motor_comp.errors import ParameterError
+from motor_comp.logs import Run, write_run
+from motor_comp.nodes.common import Param, period_ns
+
+
+@pytest.mark.timeout(90)
+def test_replay_publishes_recorded_run_with_timing(tmp_path: Path, ros_env, probe) -> None:
+    """A 0.5 s run replayed at 2× arrives complete, in order, in about 0.25 s."""
+    n = 500
+    t = np.arange(n) * 1e-3
+    run = Run(t=t, position=np.sin(t), velocity=np.cos(t), reference=np.sin(t) + 1e-6,
+              reference_velocity=np.cos(t), voltage=0.1 * t, name='synthetic')
+    path = tmp_path / 'synthetic.mcap'
+    write_run(path, run)
+    arrivals: list[float] = []
+    probe.node.create_subscription(JointState, 'joint_states',
+                                   lambda m: arrivals.append(time.monotonic()), 10000)
+    proc = subprocess.Popen([sys.executable, '-m', 'motor_comp.cli.main', 'replay',
+                             str(path), '--rate', '2', '--wait-for-subscribers', '3',
+                             '--startup-delay', '0.5', '--json'],
+                            env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        probe.spin_until(lambda: len(probe.positions) >= n and len(probe.voltages) >= n, 60,
+                         'the replayed run')
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err
+    np.testing.assert_array_equal(np.array(probe.positions), run.position)
+    assert len(probe.voltages) == n
+    np.testing.assert_array_equal(np.array(probe.voltages), run.voltage)
+    span = arrivals[-1] - arrivals[0]
+    assert 0.2 < span < 0.6          # 0.499 s recorded, replayed at --rate 2
+    assert '"/axis/joint_states": 500' in out
+
+
+def test_replay_bad_file_is_one_line_error(tmp_path: Path) -> None:
+    """Missing and corrupt files: exit 2, one line, no traceback."""
+    bad = tmp_path / 'bad.mcap'
+    bad.write_bytes(b'\x89MCAP0\r\n' + b'garbage' * 20)
+    for target in (tmp_path / 'missing.mcap', bad):
+        out = subprocess.run([sys.executable, '-m', 'motor_comp.cli.main', 'replay',
+                              str(target)], capture_output=True, text=True, timeout=60)
+        assert out.returncode == 2
+        assert out.stderr.count('\n') == 1 and 'Traceback' not in out.stderr
+        assert str(target) in out.stderr
+
+
+def test_param_descriptor_carries_unit_and_range() -> None:
+    """Descriptions state units; numeric ranges become Floating/IntegerRange."""
+    d = Param('kp', 1.0, 'gain', 'V/m', 0.0, 10.0).descriptor()
+    assert d.type == ParameterType.PARAMETER_DOUBLE
+    assert d.description == 'gain [V/m]'
+    assert (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value) == \
+        (0.0, 10.0)
+    i = Param('seed', 0, 'seed', '', 0, 5).descriptor()
+    assert i.type == ParameterType.PARAMETER_INTEGER and i.integer_range[0].to_value == 5
+    c = Param('mode', 'pid', 'law', choices=('pid', 'npid')).descriptor()
+    assert 'one of: pid, npid' in c.description
+    a = Param('speeds', (1.0, 2.0), 'speeds', 'm/s').descriptor()
+    assert a.type == ParameterType.PARAMETER_DOUBLE_ARRAY
+
+
+@given(st.floats(allow_nan=True, allow_infinity=True))
+def test_param_check_accepts_exactly_the_range(value: float) -> None:
+    """In [low, high] and finite → accepted; anything else → ParameterError naming it."""
+    spec = Param('stale_timeout', 0.5, 'timeout', 's', 1e-3, 60.0)
+    if math.isfinite(value) and 1e-3 <= value <= 60.0:
+        spec.check(value)
+    else:
+        with pytest.raises(ParameterError, match='stale_timeout'):
+            spec.check(value)
+
+
+def test_param_check_types_and_infinite_limit() -> None:
+    """Ints widen to float; wrong types and unknown choices are rejected; u_max may be inf."""
+    Param('x', 1.0, 'x', 'm', 0.0, 2.0).check(1)
+    with pytest.raises(ParameterError, match='expected float'):
+        Param('x', 1.0, 'x', 'm').check('one')
+    with pytest.raises(ParameterError, match="'bogus' is not one of"):
+        Param('mode', 'pid', 'law', choices=('pid',)).check('bogus')
+    Param('u_max', math.inf, 'limit', 'V', 1e-6, math.inf).check(math.inf)
+    with pytest.raises(ParameterError, match=r'speeds\[1\]'):
+        Param('speeds', (1.0,), 'v', 'm/s', 0.0, 10.0).check([1.0, -2.0])
+
+
+def test_period_ns_requires_whole_nanoseconds() -> None:
+    """1 kHz → 1 000 000 ns; a rate whose period is not whole ns is refused."""
+    assert period_ns(1000.0) == 1_000_000
+    assert period_ns(400.0) == 2_500_000
+    with pytest.raises(ParameterError, match='control_rate'):
+        period_ns(3.0)

@@ -1,0 +1,167 @@
+"""Exact checks of the workbench building blocks on analytic signals."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from motor_comp.errors import InputFileError
+from motor_comp.logs.run import Run
+from motor_comp.physics.axis import AxisModel
+from motor_comp.physics.effects import make_effect
+from motor_comp.workbench import kinematics, refit_linear, residual
+from motor_comp.workbench.candidates import spatial_spectrum
+from motor_comp.workbench.diagnose import fold_masks
+from motor_comp.workbench.report import whiteness
+from motor_comp.workbench.residual import force_nrmse, motor_position, reversals
+
+DT = 1e-3
+
+
+def analytic_run(model: AxisModel, *, duration: float = 8.0, amp: float = 0.04,
+                 freqs=(0.3, 0.77), name='analytic') -> Run:
+    """Motion x(t) = Σ amp·sin(2πft); the input that makes ``model`` follow it exactly."""
+    t = np.arange(0.0, duration, DT)
+    x = sum(amp * np.sin(2 * np.pi * f * t) for f in freqs)
+    v = sum(amp * 2 * np.pi * f * np.cos(2 * np.pi * f * t) for f in freqs)
+    a = sum(-amp * (2 * np.pi * f) ** 2 * np.sin(2 * np.pi * f * t) for f in freqs)
+    force = model.mass * a + sum(model.effect_forces(x, v).values(), np.zeros_like(t))
+    # invert F_in = g·(u − ke·v) − d·v
+    u = (force + model.damping * v) / model.input_gain + model.back_emf * v
+    return Run(t=t, position=x, voltage=u, name=name)
+
+
+BASE = AxisModel(mass=5.4, input_gain=15.0, back_emf=123.0, effects=(
+    make_effect('coulomb', {'fc': 10.0}), make_effect('viscous', {'fv': 10.0})))
+
+
+def test_derivatives_exact_on_cubic():
+    t = np.arange(0, 2, DT)
+    run = Run(t=t, position=0.3 * t ** 3 - 0.1 * t, voltage=np.zeros_like(t))
+    kin = kinematics(run, polyorder=3)
+    np.testing.assert_allclose(kin.v, 0.9 * t ** 2 - 0.1, atol=1e-9)
+    np.testing.assert_allclose(kin.a, 1.8 * t, atol=1e-6)
+    assert not kin.resampled and kin.window == 21
+
+
+def test_zoh_input_is_centred_and_delayed_exactly():
+    t = np.arange(0, 1, DT)
+    u = np.where(t >= 0.5, 1.0, 0.0)
+    kin = kinematics(Run(t=t, position=np.sin(t), voltage=u))
+    k = 500
+    c = kin.input_at(0.0)
+    np.testing.assert_allclose(c[k - 1:k + 2], [0.0, 0.5, 1.0], atol=1e-9)
+    d = kin.input_at(2 * DT)
+    np.testing.assert_allclose(d[k + 1:k + 4], [0.0, 0.5, 1.0], atol=1e-9)
+    q = kin.input_at(0.25 * DT)   # a quarter step: a quarter of the step is seen
+    np.testing.assert_allclose(q[k:k + 2], [0.25, 1.0], atol=1e-9)
+
+
+def test_irregular_sampling_is_resampled():
+    rng = np.random.default_rng(0)
+    t = np.cumsum(rng.uniform(1.5e-3, 4.5e-3, 3000))
+    run = Run(t=t, position=0.02 * t, voltage=np.ones_like(t))
+    kin = kinematics(run, hold='sample')
+    assert kin.resampled
+    assert np.allclose(np.diff(kin.t), kin.dt)
+    assert kin.dt == pytest.approx(np.median(np.diff(t)))
+    np.testing.assert_allclose(kin.v, 0.02, rtol=1e-9)
+
+
+def test_bad_run_arrays_are_input_errors():
+    t = np.arange(0, 1, DT)
+    x = np.sin(t)
+    x[10] = np.nan
+    with pytest.raises(InputFileError, match='position contains NaN'):
+        kinematics(Run(t=t, position=x, voltage=np.zeros_like(t)))
+    with pytest.raises(InputFileError, match='voltage'):
+        kinematics(Run(t=t, position=np.sin(t)))
+    with pytest.raises(InputFileError, match='too short|at least'):
+        kinematics(Run(t=t[:30], position=np.sin(t[:30]), voltage=np.zeros(30)))
+
+
+def test_exact_model_leaves_no_residual_and_missing_effect_is_the_residual():
+    ripple = make_effect('ripple', {'period': 0.01, 'harmonics': [[4.0, -2.0]]})
+    truth = BASE.with_effect(ripple)
+    kin = kinematics(analytic_run(truth), hold='sample')
+    res = residual(kin, truth)
+    assert res.nrmse() < 2e-3
+    res0 = residual(kin, BASE)
+    m = res0.mask
+    rip = kin.smooth(ripple.force(kin.x))
+    assert np.sqrt(np.mean((res0.r[m] - rip[m]) ** 2)) < 0.01 * np.sqrt(np.mean(rip[m] ** 2))
+
+
+@settings(max_examples=12, deadline=None)
+@given(fc=st.floats(2, 30), fv=st.floats(0, 100), f0=st.floats(-10, 10),
+       a1=st.floats(-8, 8), b1=st.floats(-8, 8), mass=st.floats(1, 20))
+def test_joint_refit_recovers_every_linear_parameter(fc, fv, f0, a1, b1, mass):
+    truth = AxisModel(mass=mass, input_gain=15.0, back_emf=123.0, effects=(
+        make_effect('coulomb', {'fc': fc}), make_effect('viscous', {'fv': fv}),
+        make_effect('offset', {'f0': f0}),
+        make_effect('ripple', {'period': 0.013, 'harmonics': [[a1, b1]]})))
+    kin = kinematics(analytic_run(truth, duration=6.0), hold='sample')
+    start = AxisModel(mass=1.5 * mass, input_gain=15.0, back_emf=123.0, effects=(
+        make_effect('coulomb', {'fc': 1.0}), make_effect('viscous', {'fv': 1.0}),
+        make_effect('offset', {'f0': 0.0}),
+        make_effect('ripple', {'period': 0.013, 'harmonics': [[0.0, 0.0]]})))
+    got = refit_linear(kin, start)
+    assert got.mass == pytest.approx(mass, rel=2e-3)
+    assert got.fc == pytest.approx(fc, abs=0.02)
+    assert got.fv == pytest.approx(fv, abs=0.05)
+    assert got.get('offset').f0 == pytest.approx(f0, abs=0.02)
+    a, b = got.get('ripple').harmonics[0]
+    assert a == pytest.approx(a1, abs=0.03) and b == pytest.approx(b1, abs=0.03)
+
+
+def test_force_nrmse_exact():
+    r = np.array([1.0, -1.0, 1.0, -1.0])
+    f = np.array([0.0, 2.0, 0.0, 2.0])
+    assert force_nrmse(r, f) == 1.0
+    assert force_nrmse(0.5 * r, 4 * f) == pytest.approx(0.5 / 4)
+
+
+def test_spatial_spectrum_finds_period_and_amplitude():
+    t = np.arange(0, 20, DT)
+    x = 0.05 * np.sin(2 * np.pi * 0.4 * t)
+    r = 3.0 * np.sin(2 * np.pi * x / 0.01 + 0.3)
+    spec = spatial_spectrum(x, r)
+    p = spec.peak_period(min_period=0.001, max_period=0.05)
+    assert abs(p - 0.01) < 0.02 * 0.01   # within the padded FFT's resolution
+    assert spec.amplitude_at(1 / 0.01) == pytest.approx(3.0, rel=0.05)
+
+
+def test_reversals_of_a_sine():
+    t = np.linspace(0, 2, 2001)
+    x = np.sin(2 * np.pi * t)   # extremes at t = 0.25, 0.75, 1.25, 1.75
+    rev = reversals(x, 0.05)
+    assert [k for k, _ in rev] == [250, 750, 1250, 1750]
+    assert [d for _, d in rev] == [-1, 1, -1, 1]
+
+
+def test_fold_masks_partition_in_contiguous_blocks():
+    mask = np.ones(103, dtype=bool)
+    mask[::7] = False
+    folds = fold_masks(mask, 5)
+    total = np.sum(folds, axis=0)
+    assert np.array_equal(total.astype(bool), mask) and total.max() == 1
+    for f in folds:
+        idx = np.flatnonzero(f)
+        assert np.all(np.flatnonzero(mask[idx[0]:idx[-1] + 1]) + idx[0] == idx)
+
+
+def test_zero_backlash_is_the_measurement():
+    kin = kinematics(analytic_run(BASE), hold='sample')
+    np.testing.assert_array_equal(motor_position(kin, 0.0, BASE, kin.u), kin.position)
+
+
+def test_whiteness_passes_white_and_fails_coloured_residuals():
+    kin = kinematics(analytic_run(BASE, duration=20.0), hold='sample')
+    res = residual(kin, BASE)
+    rng = np.random.default_rng(1)
+    white = rng.normal(size=len(kin))
+    w = whiteness(kin, type(res)(**{**res.__dict__, 'r': white}))
+    assert w.auto_outside <= 0.05 and w.cross_outside <= 0.05
+    coloured = np.convolve(white, np.ones(400) / 400, mode='same') + 0.01 * kin.u
+    w2 = whiteness(kin, type(res)(**{**res.__dict__, 'r': coloured}))
+    assert w2.auto_outside > 0.5
