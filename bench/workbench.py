@@ -55,6 +55,7 @@ def param_error(name, got, truth):
 
 
 def recovery_table(seeds: int, duration: float) -> None:
+    """Print the planted-effect recovery table."""
     print(f'## Planted-effect recovery ({duration:g} s runs at 1 kHz, {seeds} seed(s) each)')
     print(f'{"effect":<11} {"seed":>4} {"rank":>4} {"explained":>9} {"NRMSE before":>12} '
           f'{"after":>7}  parameter error')
@@ -104,6 +105,7 @@ def timed_diagnose(duration: float, seed: int = 1) -> tuple[float, float]:
 
 
 def speed(lengths: list[float]) -> None:
+    """Print the 60 s diagnose time and the scaling table."""
     timed_diagnose(10.0)   # JIT warm-up (numba caches) outside the measurement
     print('\n## Diagnose a 60 s, 1 kHz run (reference: real time = the run duration)')
     t60, sim = timed_diagnose(60.0)
@@ -122,6 +124,7 @@ def speed(lengths: list[float]) -> None:
 
 
 def main() -> int:
+    """Run the benchmark."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--seeds', type=int, default=1, help='draws per effect (default 1)')
     ap.add_argument('--duration', type=float, default=15.0, help='recovery run length [s]')

@@ -169,18 +169,18 @@ def _moves(t: np.ndarray, x: np.ndarray, ref: np.ndarray, v: np.ndarray, *,
         return ()
     moving = np.abs(v) > zero_tol * vmax
     edges = np.flatnonzero(np.diff(moving.astype(np.int8)))
-    starts = list(edges[~moving[edges]] + 1)     # first moving sample
-    ends = list(edges[moving[edges]] + 1)        # first resting sample
+    starts = edges[~moving[edges]] + 1           # first moving sample
+    ends = edges[moving[edges]] + 1              # first resting sample
     if moving[0]:
-        starts.insert(0, 0)
+        starts = np.concatenate(([0], starts))
     out = []
     for s in starts:
-        later = [e for e in ends if e > s]
-        if not later:
+        k = np.searchsorted(ends, s, side='right')
+        if k == ends.size:
             break
-        e = later[0]
-        nxt = [q for q in starts if q > e]
-        stop = nxt[0] if nxt else t.size
+        e = int(ends[k])
+        q = np.searchsorted(starts, e, side='right')
+        stop = int(starts[q]) if q < starts.size else t.size
         if t[stop - 1] - t[e] < min_dwell:
             continue
         target = float(ref[e])

@@ -71,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
     progress = bool(args.progress or sys.stderr.isatty())
     runs, metrics = [], []
     for path in args.runs:
-        r = read_run(path, progress=progress, namespace=args.namespace)
+        r = read_run(path, progress=progress, namespace=args.namespace,
+                     signals=('reference', 'reference_velocity', 'voltage'))
         runs.append(r)
         try:
             metrics.append(compute_metrics(r, glitch_window=args.glitch_window,

@@ -35,6 +35,9 @@ def add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument('--input-hold', choices=('zoh', 'sample'), default=None,
                    help='logged input is a held command (zoh, default for voltage) or a '
                         'sampled measurement (sample, default for current/force)')
+    p.add_argument('--rotary', action='store_true',
+                   help='the position is an angle [rad] (rotary axis): angles in mrad, '
+                        'periods also in cycles/rev')
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -64,14 +67,14 @@ def run(args: argparse.Namespace) -> int:
     s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold)
     cmp = compare(s.run, s.kin, s.model, horizon=args.horizon)
     white = rep.whiteness(s.kin, cmp.residual)
-    text = cmp.summary() + (f'\nwhiteness: {100 * white.auto_outside:.0f} % of '
-                            f'autocorrelation lags outside the 99 % band, '
-                            f'{100 * white.cross_outside:.0f} % of input cross-correlation')
+    text = cmp.summary(rotary=args.rotary) + (
+        f'\nwhiteness: {100 * white.auto_outside:.0f} % of autocorrelation lags outside '
+        f'the 99 % band, {100 * white.cross_outside:.0f} % of input cross-correlation')
     data = cmp.as_dict()
     data['whiteness'] = white.as_dict()
     if args.report:
         out = rep.prepare_dir(args.report)
-        figs = rep.residual_figures(out, s.kin, cmp.residual)
+        figs = rep.residual_figures(out, s.kin, cmp.residual, rotary=args.rotary)
         figs.append(rep.prediction_figure(out, s.kin, cmp.prediction))
         page = rep.write_html(out, f'compare: {s.kin.name} vs {args.model}', text, figs)
         data['report'] = str(page)

@@ -48,7 +48,7 @@ def ratios(rows: dict[str, dict[str, Any]]) -> list[tuple[str, float]]:
                 continue
             out.append((f'ball-screw RMS error, {ff} / none',
                         r['rms_error'] / base['rms_error']))
-            if base['max_glitch'] > 0:
+            if base.get('max_glitch') and r.get('max_glitch') is not None:
                 out.append((f'ball-screw max glitch, {ff} / none',
                             r['max_glitch'] / base['max_glitch']))
     return out
@@ -106,8 +106,9 @@ def run(args: argparse.Namespace) -> int:
     lines = ['| run | rms error [µm] | max error [µm] | max glitch [µm] | mean glitch [µm] |',
              '|---|---|---|---|---|']
     for r in rows.values():
-        lines.append(f'| {r["name"]} | {r["rms_error"] * 1e6:.3f} | {r["max_error"] * 1e6:.3f}'
-                     f' | {r["max_glitch"] * 1e6:.3f} | {r["mean_glitch"] * 1e6:.3f} |')
+        cells = ' | '.join('-' if r.get(k) is None else f'{r[k] * 1e6:.3f}'
+                           for k in ('rms_error', 'max_error', 'max_glitch', 'mean_glitch'))
+        lines.append(f'| {r["name"]} | {cells} |')
     lines += ['', '| comparison | ratio |', '|---|---|']
     lines += [f'| {c} | {r:.3f} |' for c, r in comparisons]
     (out / 'summary.md').write_text('\n'.join(lines) + '\n', encoding='utf-8')

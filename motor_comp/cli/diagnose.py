@@ -1,4 +1,4 @@
-"""``motor-comp diagnose RUN --model MODEL.yaml``: which physical effect is the model missing?
+"""``motor-comp diagnose RUN --model MODEL.yaml``: find the effect a model is missing.
 
 Every effect of the vocabulary not in the model (and a mass refit) is fitted to the
 force residual and ranked by the fraction of it removed on held-out time blocks;
@@ -38,8 +38,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_common(p)
     add_diagnose_options(p)
     p.add_argument('--report', metavar='DIR', help='write PNG figures and index.html here')
-    p.add_argument('--rotary', action='store_true',
-                   help='the position is an angle [rad]: give periods in cycles/rev too')
     p.set_defaults(func=run)
 
 
@@ -54,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     data = d.as_dict()
     if args.report:
         out = rep.prepare_dir(args.report)
-        figs = rep.residual_figures(out, s.kin, d.residual)
+        figs = rep.residual_figures(out, s.kin, d.residual, rotary=args.rotary)
         figs.insert(0, rep.candidates_figure(out, d.candidates))
         page = rep.write_html(out, f'diagnose: {s.kin.name} with {args.model}', text, figs)
         data['report'] = str(page)

@@ -40,19 +40,20 @@ def run(args: argparse.Namespace) -> int:
     if args.output and Path(args.output).is_dir():
         raise MotorCompError(f'{args.output}: is a directory, expected a model file name')
     s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold)
-    say = None if args.json else print
-    if args.json:
-        def say(msg: str) -> None:
-            print(msg, file=sys.stderr)
+
+    def say(msg: str) -> None:
+        # progress goes to stderr with --json so stdout holds exactly one object
+        print(msg, file=sys.stderr if args.json else sys.stdout)
     result = fit(s.kin, s.model, add=args.add, auto=args.auto, folds=args.folds,
-                 min_gain=args.min_gain, progress=say)
+                 min_gain=args.min_gain, progress=say, rotary=args.rotary)
     before = predict(s.kin, s.model)
     after = predict(s.kin, result.model)
     first, last = result.steps[0], result.steps[-1]
+    unit, k = ('mrad', 1e3) if args.rotary else ('µm', 1e6)
     lines = [f'force NRMSE: before {100 * first.force_nrmse:.1f} %, after '
              f'{100 * last.force_nrmse:.1f} % (held-out)',
              f'position, {1e3 * before.horizon:.0f} ms-ahead prediction RMS error: before '
-             f'{1e6 * before.rms_error:.2f} µm, after {1e6 * after.rms_error:.2f} µm']
+             f'{k * before.rms_error:.2f} {unit}, after {k * after.rms_error:.2f} {unit}']
     if args.output:
         try:
             result.model.save(args.output)

@@ -181,6 +181,7 @@ class RunSpec:
     duration: float = 2.0
     control_rate: float = 1000.0
     seed: int = 0
+    namespace: str = 'axis'
     extra_params: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
 
     def node_params(self) -> dict[str, dict[str, Any]]:
@@ -220,12 +221,17 @@ def run_nodes(spec: RunSpec, *, workdir: Path | None = None, timeout: float | No
         timeout = 60.0 + 20.0 * spec.duration
     with tempfile.TemporaryDirectory(prefix='motor_comp_run_') as tmp:
         work = Path(workdir or tmp)
-        params_file = write_params_file(work / 'params.yaml', spec.node_params())
+        ns = spec.namespace.strip('/')
+        if not ns or not all(part.isidentifier() for part in ns.split('/')):
+            raise ParameterError(f'namespace must be a ROS name like axis or arm/x, '
+                                 f'got {spec.namespace!r}')
+        params_file = write_params_file(work / 'params.yaml', spec.node_params(),
+                                        namespace=ns)
         env = ros_environment(domain_id)
         t0 = time.monotonic()
         with NodeGroup(work, env) as group:
             for node in NODES:
-                group.start(node, params_file)
+                group.start(node, params_file, ['-r', f'__ns:=/{ns}'])
             if progress:
                 print(f'motor-comp run: {spec.plant}/{spec.controller}/{spec.feedforward} '
                       f'{spec.timing} {spec.duration:g} s (ROS_DOMAIN_ID '
@@ -246,11 +252,11 @@ def run_nodes(spec: RunSpec, *, workdir: Path | None = None, timeout: float | No
     return out
 
 
-def metrics_row(path: Path) -> dict[str, Any]:
+def metrics_row(path: Path, namespace: str = 'axis') -> dict[str, Any]:
     """Read a recorded run and compute its metrics (DESIGN.md §6 keys) plus its name."""
     from motor_comp.analysis.metrics import compute_metrics
     from motor_comp.logs import read_run
-    run = read_run(path)
+    run = read_run(path, namespace=namespace.strip('/'))
     row = {'name': run.name, 'path': str(path)}
     row.update(compute_metrics(run).as_dict())
     return row
@@ -262,9 +268,14 @@ def print_table(rows: Sequence[Mapping[str, Any]], *, label: str = 'run') -> Non
            f'{"mean_glitch":>11}'
     print(head + '\n' + '-' * len(head))
     for r in rows:
-        print(f'{str(r.get(label, r.get("name"))):<28} {r["rms_error"] * 1e6:>8.3f} µm '
-              f'{r["max_error"] * 1e6:>8.3f} µm {r["max_glitch"] * 1e6:>8.3f} µm '
-              f'{r["mean_glitch"] * 1e6:>8.3f} µm')
+        cells = ' '.join(_um(r.get(k)) for k in ('rms_error', 'max_error', 'max_glitch',
+                                                 'mean_glitch'))
+        print(f'{str(r.get(label, r.get("name"))):<28} {cells}')
+
+
+def _um(value: float | None) -> str:
+    """Format metres as micrometres; ``-`` when undefined (e.g. no reversal, no glitch)."""
+    return f'{value * 1e6:>8.3f} µm' if value is not None else f'{"-":>11}'
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -282,6 +293,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--duration', type=float, default=2.0, help='sim time [s] (default 2)')
     p.add_argument('--rate', type=float, default=1000.0, help='control rate [Hz]')
     p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--namespace', default='axis',
+                   help='namespace of the axis topics and nodes (default axis)')
     p.add_argument('--timeout', type=float, default=None,
                    help='wall-time limit [s] (default 60 + 20·duration)')
     p.add_argument('--domain-id', type=int, default=None,
@@ -302,9 +315,9 @@ def run(args: argparse.Namespace) -> int:
     spec = RunSpec(output=args.output, plant=args.plant, controller=args.controller,
                    feedforward=args.feedforward, trajectory=args.trajectory,
                    timing=args.mode, duration=args.duration, control_rate=args.rate,
-                   seed=args.seed)
+                   seed=args.seed, namespace=args.namespace)
     path = run_nodes(spec, timeout=args.timeout, domain_id=args.domain_id)
-    row = metrics_row(path)
+    row = metrics_row(path, args.namespace)
     row.update(plant=args.plant, controller=args.controller, feedforward=args.feedforward,
                mode=args.mode)
     if args.json:

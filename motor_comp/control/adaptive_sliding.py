@@ -63,7 +63,7 @@ import math
 import numpy as np
 from numba import njit
 
-from motor_comp.control._jitcache import JIT_OPTIONS
+from motor_comp.control._jitcache import JIT_INLINE
 from motor_comp.control.params import ParamsBase, spec
 from motor_comp.physics.axis import AxisModel
 
@@ -140,17 +140,22 @@ def estimates_in_units(theta: np.ndarray, input_gain: float) -> dict[str, float]
             'robust_gain': float(theta[6] * g)}
 
 
-@njit(**JIT_OPTIONS)
-def adaptive_output(th, gam, lo, hi, ks, lam1, lam2, phi, omega, tf, e, ed, integ, ra, rv,
-                    y, dt, adapt):
+@njit(**JIT_INLINE)
+def adaptive_output(th, i_th, q, i_gam, i_lo, i_hi, ks, lam1, lam2, phi, omega, tf, e, ed,
+                    integ, ra, rv, y, dt, adapt):
     """Control [V] of Tan eq. 15 and, if ``adapt``, one Euler step of eq. 18–24 on ``th``.
+
+    The vectors are the controller's packed state and parameters with offsets (no array
+    views in the compiled loop).
 
     Parameters
     ----------
-    th : ndarray (7,)
-        Estimates ``[θ1, θ2, fc/g, fv/g, A1/g, B1/g, k̂]`` (updated in place).
-    gam, lo, hi : ndarray (7,)
-        Adaptation rates and projection box.
+    th, i_th : ndarray, int
+        Estimates ``[θ1, θ2, fc/g, fv/g, A1/g, B1/g, k̂]`` at ``th[i_th:i_th + 7]``
+        (updated in place).
+    q, i_gam, i_lo, i_hi : ndarray, int, int, int
+        Adaptation rates and projection box at ``q[i_gam + i]``, ``q[i_lo + i]``,
+        ``q[i_hi + i]``.
     ks, lam1, lam2, phi, omega : float
         K [V·s/m], λ1 [1/s], λ2 [1/s²], φ [m/s], ripple ω [rad/m].
     tf : float
@@ -180,16 +185,17 @@ def adaptive_output(th, gam, lo, hi, ks, lam1, lam2, phi, omega, tf, e, ed, inte
     y3 = rv
     y4 = np.sin(omega * y)
     y5 = np.cos(omega * y)
-    u = ks * s + th[0] * y0 + th[1] * y1 + th[2] * y2 + th[3] * y3 + th[4] * y4 \
-        + th[5] * y5 + th[6] * sat
+    j = i_th
+    u = ks * s + th[j] * y0 + th[j + 1] * y1 + th[j + 2] * y2 + th[j + 3] * y3 \
+        + th[j + 4] * y4 + th[j + 5] * y5 + th[j + 6] * sat
     if adapt:
         reg = (y0, y1, y2, y3, y4, y5, abs(sd))
         for i in range(7):
             g = sd * reg[i] if i < 6 else reg[i]
-            v = th[i] + dt * gam[i] * g
-            if v < lo[i]:
-                v = lo[i]
-            elif v > hi[i]:
-                v = hi[i]
-            th[i] = v
+            v = th[j + i] + dt * q[i_gam + i] * g
+            if v < q[i_lo + i]:
+                v = q[i_lo + i]
+            elif v > q[i_hi + i]:
+                v = q[i_hi + i]
+            th[j + i] = v
     return u, s

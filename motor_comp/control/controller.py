@@ -22,7 +22,7 @@ from typing import Any, Mapping
 import numpy as np
 from numba import njit
 
-from motor_comp.control._jitcache import JIT_OPTIONS
+from motor_comp.control._jitcache import JIT_INLINE
 from motor_comp.control.adaptive_sliding import ESTIMATES, N_THETA, AdaptiveParams, \
     adaptive_output, estimates_in_units, nominal_theta, projection_box
 from motor_comp.control.feedforward import Feedforward, friction_feedforward
@@ -88,24 +88,24 @@ C_GMS_SLIP = C_GMS_F + MAX_ELEMENTS
 C_SIZE = C_GMS_SLIP + MAX_ELEMENTS
 
 
-@njit(**JIT_OPTIONS)
-def feedback(Q, th, e, ed, integ, ra, rv, y, dt, adapt):
+@njit(**JIT_INLINE)
+def feedback(Q, C, e, ed, integ, ra, rv, y, dt, adapt):
     """Feedback command [V] of the mode in ``Q`` and the sliding variable ``s`` [m/s].
 
-    ``th`` (adaptive estimates) is updated in place when ``adapt`` is true.
+    The adaptive estimates in ``C`` are updated in place when ``adapt`` is true.
     """
     mode = int(Q[Q_MODE])
     if mode == 1:
-        return adaptive_output(th, Q[Q_GAMMA:Q_GAMMA + 7], Q[Q_LO:Q_LO + 7],
-                               Q[Q_HI:Q_HI + 7], Q[Q_KS], Q[Q_LAM1], Q[Q_LAM2], Q[Q_PHI],
-                               Q[Q_OMEGA], Q[Q_TF], e, ed, integ, ra, rv, y, dt, adapt)
+        return adaptive_output(C, C_TH, Q, Q_GAMMA, Q_LO, Q_HI, Q[Q_KS], Q[Q_LAM1],
+                               Q[Q_LAM2], Q[Q_PHI], Q[Q_OMEGA], Q[Q_TF], e, ed, integ, ra,
+                               rv, y, dt, adapt)
     if mode == 2:
         k = npid_gain(e, Q[Q_K0], Q[Q_EMAX], Q[Q_KMAX])
         return k * pid_output(Q[Q_KP], Q[Q_KI], Q[Q_KD], e, integ, ed), 0.0
     return pid_output(Q[Q_KP], Q[Q_KI], Q[Q_KD], e, integ, ed), 0.0
 
 
-@njit(**JIT_OPTIONS)
+@njit(**JIT_INLINE)
 def controller_step(Q, C, r, rv, ra, y, vy, dt):
     """One control step: command [V] from reference (r, ṙ, r̈) and measurement (y, v).
 
@@ -135,12 +135,11 @@ def controller_step(Q, C, r, rv, ra, y, vy, dt):
     C[C_RVL] = rv
     f_ff, f_static, f_gms = friction_feedforward(
         int(Q[Q_FF]), rv, dx, dt, Q[Q_FC], Q[Q_FS], Q[Q_VS], Q[Q_DELTA], Q[Q_FV],
-        C[C_GMS_F:C_GMS_F + n], C[C_GMS_SLIP:C_GMS_SLIP + n],
-        Q[Q_GMS_ALPHA:Q_GMS_ALPHA + n], Q[Q_GMS_K:Q_GMS_K + n], Q[Q_GMS_C])
+        C, C_GMS_F, C_GMS_SLIP, Q, Q_GMS_ALPHA, Q_GMS_K, n, Q[Q_GMS_C])
     C[C_FSTAT] = f_static
     C[C_FGMS] = f_gms
     u_ff = f_ff / Q[Q_GAIN]
-    u_fb, s = feedback(Q, C[C_TH:C_TH + 7], e, ed, integ, ra, rv, y, dt, Q[Q_ADAPT] > 0.5)
+    u_fb, s = feedback(Q, C, e, ed, integ, ra, rv, y, dt, Q[Q_ADAPT] > 0.5)
     C[C_S] = s
     C[C_RAL] = ra
     C[C_YL] = y
@@ -267,8 +266,8 @@ class Controller:
         if coef <= 0.0 or not math.isfinite(target):
             return
         for _ in range(2):
-            u_fb, _s = feedback(Q, C[C_TH:C_TH + N_THETA].copy(), C[C_E], C[C_ED], C[C_I],
-                                C[C_RAL], C[C_RVL], C[C_YL], C[C_DTL], False)
+            u_fb, _s = feedback(Q, C.copy(), C[C_E], C[C_ED], C[C_I], C[C_RAL], C[C_RVL],
+                                C[C_YL], C[C_DTL], False)
             C[C_I] += (target - C[C_UFF] - u_fb) / coef
 
     def set_mode(self, mode: 'str | ControlMode', *, keep_estimates: bool = True) -> None:

@@ -8,7 +8,7 @@ Modes (:class:`Feedforward`):
   Stribeck, :func:`~motor_comp.physics.effects.viscous.viscous_force` for σ·v);
 * ``gms`` — the Generalized Maxwell-Slip elements (Chiew eq. 3–5) driven by the reference
   displacement, stepped by the physics kernel's own
-  :func:`~motor_comp.physics.effects.presliding.gms_update` (no second copy);
+  :func:`~motor_comp.physics.effects.presliding.gms_step` (no second copy);
 * ``static+gms`` — both, without counting sliding friction twice: the GMS elements carry
   the Coulomb + Stribeck level (in sliding they converge to the Stribeck curve ``s(v)``),
   so the static model contributes only what the elements do not model, the viscous
@@ -22,11 +22,12 @@ from __future__ import annotations
 
 import enum
 
+import numpy as np
 from numba import njit
 
-from motor_comp.control._jitcache import JIT_OPTIONS
+from motor_comp.control._jitcache import JIT_INLINE
 from motor_comp.errors import ParameterError
-from motor_comp.physics.effects.presliding import gms_update
+from motor_comp.physics.effects.presliding import gms_step
 from motor_comp.physics.effects.stribeck import stribeck_curve
 from motor_comp.physics.effects.viscous import viscous_force
 
@@ -60,14 +61,15 @@ FEEDFORWARD_LABELS = {Feedforward.NONE: 'none', Feedforward.STATIC: 'static',
                       Feedforward.GMS: 'gms', Feedforward.STATIC_GMS: 'static+gms'}
 
 
-@njit(**JIT_OPTIONS)
+@njit(**JIT_INLINE)
 def static_feedforward(v, fc, fs, vs, delta, fv):
     """Return the static-model friction [N] at reference velocity ``v`` [m/s] (Chiew eq. 2)."""
     return stribeck_curve(v, fc, fs, vs, delta) + viscous_force(v, fv)
 
 
-@njit(**JIT_OPTIONS)
-def friction_feedforward(mode, v, dx, dt, fc, fs, vs, delta, fv, forces, slip, alpha, k, c):
+@njit(**JIT_INLINE)
+def friction_feedforward(mode, v, dx, dt, fc, fs, vs, delta, fv, st, i_f, i_s, q, i_a, i_k,
+                         n, c):
     """Feedforward friction force [N] for ``mode`` (0 none, 1 static, 2 gms, 3 both).
 
     Returns ``(force of the mode, static-model force, GMS element force)`` [N]; the last
@@ -86,16 +88,18 @@ def friction_feedforward(mode, v, dx, dt, fc, fs, vs, delta, fv, forces, slip, a
     fc, fs, vs, delta, fv : float
         Nominal static model: Coulomb [N], breakaway [N], Stribeck velocity [m/s],
         shape [-], viscous σ [N·s/m].
-    forces, slip : ndarray
-        GMS element state (updated in place whenever a GMS mode is active, so that a
-        switch to it is bumpless).
-    alpha, k, c : ndarray, ndarray, float
-        Nominal GMS elements: slip limits [-], stiffnesses [N/m], attraction rate [1/s].
+    st, i_f, i_s : ndarray, int, int
+        GMS element state: forces ``st[i_f + i]`` [N] and phases ``st[i_s + i]``
+        (updated in place whenever a GMS mode is active, so that a switch to it is
+        bumpless).
+    q, i_a, i_k, n, c : ndarray, int, int, int, float
+        Nominal GMS elements: slip limits ``q[i_a + i]`` [-], stiffnesses ``q[i_k + i]``
+        [N/m], ``i < n``; attraction rate ``c`` [1/s].
     """
     f_el = 0.0
-    if alpha.shape[0] > 0:
+    if n > 0:
         s_v = stribeck_curve(v, fc, fs, vs, delta)
-        f_el = gms_update(forces, slip, alpha, k, c, dx, v, s_v, dt)
+        f_el = gms_step(st, i_f, st, i_s, q, i_a, q, i_k, n, np.exp(-c * dt), dx, v, s_v)
     f_static = static_feedforward(v, fc, fs, vs, delta, fv)
     if mode == 1:
         return f_static, f_static, f_el

@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numba import njit
 
-from motor_comp.control._jitcache import JIT_OPTIONS
+from motor_comp.control._jitcache import JIT_INLINE
 from motor_comp.control.params import ParamsBase, spec
 from motor_comp.errors import ParameterError
 from motor_comp.physics.axis import AxisModel
@@ -47,7 +47,7 @@ class NPIDParams(ParamsBase):
                         0.0, 100.0)
 
 
-@njit(**JIT_OPTIONS)
+@njit(**JIT_INLINE)
 def npid_gain(e, k0, e_max, k_max):
     """Nonlinear gain k(e) [-] of Chiew eq. 6, saturated at |e| = e_max and at ``k_max``."""
     a = abs(e)

@@ -19,7 +19,7 @@ import math
 
 from numba import njit
 
-from motor_comp.control._jitcache import JIT_OPTIONS
+from motor_comp.control._jitcache import JIT_INLINE
 from motor_comp.control.params import ParamsBase, spec
 
 
@@ -35,7 +35,7 @@ class PIDParams(ParamsBase):
     u_max: float = spec(math.inf, 'V', 'output saturation ±u_max', 1e-6, math.inf)
 
 
-@njit(**JIT_OPTIONS)
+@njit(**JIT_INLINE)
 def filter_derivative(prev, raw, tf, dt):
     """First-order low-pass of the error rate (backward Euler), time constant ``tf`` [s]."""
     if tf <= 0.0:
@@ -43,7 +43,7 @@ def filter_derivative(prev, raw, tf, dt):
     return prev + dt / (tf + dt) * (raw - prev)
 
 
-@njit(**JIT_OPTIONS)
+@njit(**JIT_INLINE)
 def pid_output(kp, ki, kd, e, integ, ed):
     """``Kp·e + Ki·∫e + Kd·ė_f`` [V]."""
     return kp * e + ki * integ + kd * ed

@@ -26,7 +26,7 @@ from typing import Any, Mapping
 import numpy as np
 from numba import njit
 
-from motor_comp.control._jitcache import JIT_OPTIONS
+from motor_comp.control._jitcache import JIT_INLINE, JIT_OPTIONS
 from motor_comp.errors import ParameterError, check_finite, check_nonnegative, \
     check_positive
 
@@ -50,7 +50,7 @@ class Reference:
 
 
 # ---- compiled evaluation ----------------------------------------------------------
-@njit(**JIT_OPTIONS)
+@njit(**JIT_INLINE)
 def _sinusoid(T, t):
     amp, period, x0 = T[1], T[2], T[3]
     w = 2.0 * np.pi / period
@@ -58,7 +58,7 @@ def _sinusoid(T, t):
             amp * w * w * np.cos(w * t))
 
 
-@njit(**JIT_OPTIONS)
+@njit(**JIT_INLINE)
 def _point_to_point(T, t):
     dist, t_move, t_dwell, x0 = T[1], T[2], T[3], T[4]
     cycle = 2.0 * (t_move + t_dwell)
@@ -81,7 +81,7 @@ def _point_to_point(T, t):
             sign * dist * dds / (t_move * t_move))
 
 
-@njit(**JIT_OPTIONS)
+@njit(**JIT_INLINE)
 def _segments(T, t):
     # packed: [kind, n, period, t0[n], p0[n], v0[n], a[n]]
     n = int(T[1])
@@ -103,7 +103,7 @@ def _segments(T, t):
     return p0 + v0 * tau + 0.5 * a * tau * tau, v0 + a * tau, a
 
 
-@njit(**JIT_OPTIONS)
+@njit(**JIT_INLINE)
 def _chirp(T, t):
     amp, f0, f1, dur, t_fade, x0 = T[1], T[2], T[3], T[4], T[5], T[6]
     k = (f1 - f0) / dur
@@ -129,7 +129,7 @@ def _chirp(T, t):
     return pos, vel, acc
 
 
-@njit(**JIT_OPTIONS)
+@njit(**JIT_INLINE)
 def traj_eval(T, t):
     """Evaluate a packed trajectory ``T`` at time ``t`` [s] → (x [m], v [m/s], a [m/s²])."""
     kind = int(T[0])

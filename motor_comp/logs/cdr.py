@@ -116,7 +116,7 @@ def joint_state_layout(data: bytes, joint: bytes) -> JointStateLayout | int:
 
 
 def payload_matrix(buf: np.ndarray, start: np.ndarray, length: int) -> np.ndarray:
-    """The ``(n, length)`` payload bytes at ``start`` (a strided view when evenly spaced)."""
+    """Return the ``(n, length)`` bytes at ``start`` (a strided view when evenly spaced)."""
     n = start.shape[0]
     if n > 1:
         d = np.diff(start)
@@ -139,10 +139,12 @@ def decode_joint_states_fixed(rows: np.ndarray, layout: JointStateLayout
     None when a layout-defining byte differs in some row (the layout varies).
     """
     mask = layout.constant_mask()
-    const = rows[:, mask]
-    if not np.array_equal(const, np.broadcast_to(const[0], const.shape)):
-        return None
+    # compare the layout-defining byte ranges of every row with the first row's
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.view(np.int8), [0]))))
     n = rows.shape[0]
+    for a, b in zip(edges[::2], edges[1::2]):
+        if not np.array_equal(rows[:, a:b], np.broadcast_to(rows[0, a:b], (n, b - a))):
+            return None
     sec = _column(rows, 4, '<i4').astype(np.int64)
     stamp = sec * 1_000_000_000 + _column(rows, 8, '<u4')
     out = []

@@ -9,7 +9,7 @@ Reading (:func:`read_run`) accepts any MCAP with those topics, whoever wrote it,
 needs no ROS install.  Policies (documented contract of the reader):
 
 * **Time base.**  ``Run.t`` is the header stamp of ``/axis/joint_states`` [s]
-  (log times if the publisher left all stamps at zero).  ``/axis/reference`` uses its
+  (log times if the publisher left the stamps at zero).  ``/axis/reference`` uses its
   header stamps; ``/axis/voltage`` (Float64, no header) its log time — shifted into the
   stamp clock by the median ``stamp − log time`` of the joint states when the two
   clocks are clearly different (> 1 s apart, e.g. sim-time stamps, wall-clock log).
@@ -25,6 +25,13 @@ needs no ROS install.  Policies (documented contract of the reader):
   is read record by record up to the damage; what was complete is returned, with a
   warning stating where reading stopped and how many messages/what time span were
   recovered.  If nothing usable precedes the damage, :class:`InputFileError`.
+
+Speed and memory: the file is read record by record (one chunk in memory at a time);
+a chunk's message indexes give the offsets of its messages, whose payloads are decoded
+as numpy byte matrices (:mod:`~motor_comp.logs.cdr`); chunks without usable indexes or
+with varying layouts go through the compiled scanner (:mod:`~motor_comp.logs.cdr_jit`),
+big-endian payloads through ``mcap_ros2``'s general decoder.  Only the decoded arrays
+are kept.
 """
 from __future__ import annotations
 
@@ -36,7 +43,7 @@ import struct
 import time
 import zlib
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping
+from typing import Any, Callable, Collection, Iterator, Mapping
 
 import numpy as np
 
@@ -321,6 +328,7 @@ class _Topic:
     topic: str
     kind: str                     # 'joint' or 'scalar'
     columns: dict[str, _Column] = dataclasses.field(default_factory=dict)
+    drop: frozenset[str] = frozenset()      # decoded fields not to keep
     corrupt: int = 0
     messages: int = 0
     log_minus_stamp: list[np.ndarray] = dataclasses.field(default_factory=list)
@@ -361,7 +369,7 @@ class _Damage(Exception):
 
 def _gather_u64(buf: np.ndarray, at: np.ndarray) -> np.ndarray:
     """Return the little-endian uint64 at each offset ``at`` of ``buf``."""
-    return np.ascontiguousarray(buf[at[:, None] + np.arange(8)]).view('<u8')[:, 0]
+    return np.ascontiguousarray(cdr.payload_matrix(buf, at, 8)).view('<u8')[:, 0]
 
 
 def _record_stream(data: bytes):
@@ -386,10 +394,10 @@ def _decompress(compression: str, data: bytes, size: int) -> bytes:
 class _Reader:
     """One pass over an MCAP file, decoding the wanted topics chunk by chunk."""
 
-    def __init__(self, path: Path, wanted: Mapping[str, str], joint: str,
-                 progress: Progress) -> None:
+    def __init__(self, path: Path, wanted: Mapping[str, tuple[str, frozenset[str]]],
+                 joint: str, progress: Progress) -> None:
         self.path = path
-        self.wanted = wanted           # topic -> kind
+        self.wanted = wanted           # topic -> (kind, fields not to keep)
         self.joint = np.frombuffer(joint.encode(), np.uint8).copy()
         self.joint_name = joint
         self.progress = progress
@@ -490,7 +498,7 @@ class _Reader:
         self.all_topics[ch.topic] = name
         if ch.topic not in self.wanted:
             return
-        kind = self.wanted[ch.topic]
+        kind, drop = self.wanted[ch.topic]
         if kind == 'joint' and name != schemas.JOINT_STATE:
             raise InputFileError(f'{self.path}: {ch.topic} has type {name or "(no schema)"}, '
                                  f'expected {schemas.JOINT_STATE}')
@@ -498,7 +506,7 @@ class _Reader:
             raise InputFileError(f'{self.path}: {ch.topic} is {ch.message_encoding!r}-encoded; '
                                  'only ROS 2 CDR is supported')
         self.channels[ch.id] = _Channel(ch.topic, name, ch.message_encoding, schema)
-        self.topics.setdefault(ch.topic, _Topic(ch.topic, kind))
+        self.topics.setdefault(ch.topic, _Topic(ch.topic, kind, drop=drop))
 
     def _chunk_bytes(self, body: bytes) -> np.ndarray:
         """Decompress and CRC-check a chunk record's records."""
@@ -549,19 +557,24 @@ class _Reader:
         are walked and must be schemas/channels only, else the scanner is used.
         """
         n = buf.shape[0]
-        offs = np.concatenate(list(index.values()))
-        if offs.size == 0 or offs.min() < 0 or offs.max() > n - 31:
+        per: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        for cid, o in index.items():
+            if o.size == 0:
+                continue
+            o = np.sort(o)             # the index is in log-time order; we want file order
+            if o[0] < 0 or o[-1] > n - 31 or not np.all(buf[o] == _OP_MESSAGE):
+                return False
+            if not np.all((buf[o + 9] | (buf[o + 10].astype(np.int64) << 8)) == cid):
+                return False
+            # per channel the records usually repeat with one stride: strided reads
+            per[cid] = (o, _gather_u64(buf, o + 1).astype(np.int64))
+        if not per:
             return False
+        offs = np.concatenate([o for o, _ in per.values()])
+        ends = np.concatenate([o + 9 + ln for o, ln in per.values()])
         order = np.argsort(offs, kind='stable')
-        cids = np.concatenate([np.full(v.size, c) for c, v in index.items()])[order]
-        offs = offs[order]
-        if not np.all(buf[offs] == _OP_MESSAGE):
-            return False
-        lens = _gather_u64(buf, offs + 1).astype(np.int64)
-        ends = offs + 9 + lens
-        if np.any(lens < 22) or np.any(ends > n) or np.any(offs[1:] < ends[:-1]):
-            return False
-        if not np.array_equal(buf[offs + 9] | (buf[offs + 10].astype(np.int64) << 8), cids):
+        offs, ends = offs[order], ends[order]
+        if np.any(ends - offs < 31) or np.any(ends > n) or np.any(offs[1:] < ends[:-1]):
             return False
         starts = np.concatenate(([0], ends))
         stops = np.concatenate((offs, [n]))
@@ -578,11 +591,10 @@ class _Reader:
                 p += 9 + ln
         self.messages += int(offs.size)
         for cid, ch in self.channels.items():
-            sel = np.flatnonzero(cids == cid)
-            if sel.size == 0:
+            if cid not in per:
                 continue
-            o = offs[sel]
-            ds, dl = o + 31, lens[sel] - 22
+            o, lens = per[cid]
+            ds, dl = o + 31, lens - 22
             log = _gather_u64(buf, o + 15).astype(np.int64)
             topic = self.topics[ch.topic]
             if not (np.all(dl == dl[0]) and self._fixed(ch, topic, buf, ds, int(dl[0]), log)):
@@ -651,7 +663,7 @@ class _Reader:
         for key, bit, arr in (('position', cdr.HAS_POSITION, pos),
                               ('velocity', cdr.HAS_VELOCITY, vel),
                               ('effort', cdr.HAS_EFFORT, eff)):
-            has = arr is not None and np.any(present & bit)
+            has = arr is not None and key not in topic.drop and np.any(present & bit)
             arrays[key] = arr if has else int(stamp.size)   # type: ignore[assignment]
         topic.add(**arrays)
         topic.messages += int(stamp.size)
@@ -757,7 +769,7 @@ def _clean(path: Path, topic: str, field: str, t: np.ndarray, v: np.ndarray
 
 
 def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str = 'axis',
-             joint: str = 'axis') -> Run:
+             joint: str = 'axis', signals: Collection[str] | None = None) -> Run:
     """Read an MCAP run into time-aligned arrays (see the module docstring for policies).
 
     Parameters
@@ -771,6 +783,9 @@ def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str 
         Topic namespace (DESIGN.md §5), ``axis`` by default.
     joint : str
         Joint name to take from multi-joint ``JointState`` messages.
+    signals : collection of str, optional
+        The :attr:`Run.SIGNALS` to return (``position`` always); the others are not
+        kept, which saves memory on long runs.  Default: all.
 
     Returns
     -------
@@ -800,8 +815,18 @@ def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str 
     if size < 8:
         raise InputFileError(f'{path}: not an MCAP file (only {size} bytes)')
     names = schemas.topics(namespace)
-    wanted = {names['reference']: 'joint', names['joint_states']: 'joint',
-              names['voltage']: 'scalar'}
+    keep = set(Run.SIGNALS) if signals is None else set(signals) | {'position'}
+    unknown = keep - set(Run.SIGNALS)
+    if unknown:
+        raise ParameterError(f'signals: unknown {sorted(unknown)}; choose from {Run.SIGNALS}')
+    wanted = {names['joint_states']: ('joint', frozenset(
+        f for f in ('velocity', 'effort') if f not in keep))}
+    if keep & {'reference', 'reference_velocity'}:
+        wanted[names['reference']] = ('joint', frozenset(
+            {'effort'} | ({'position'} if 'reference' not in keep else set())
+            | ({'velocity'} if 'reference_velocity' not in keep else set())))
+    if 'voltage' in keep:
+        wanted[names['voltage']] = ('scalar', frozenset())
     prog = Progress(path.name, size, enabled=progress)
     reader = _Reader(path, wanted, joint, prog)
     try:
@@ -847,8 +872,9 @@ def _assemble(path: Path, reader: _Reader, names: Mapping[str, str]) -> Run:
     series: dict[str, tuple[np.ndarray, np.ndarray] | None] = {}
     for field, bit in (('position', cdr.HAS_POSITION), ('velocity', cdr.HAS_VELOCITY),
                        ('effort', cdr.HAS_EFFORT)):
-        series[field] = _clean(path, js.topic, field,
-                               *_masked(stamp, js.get(field), present, bit))
+        if field not in js.drop:
+            series[field] = _clean(path, js.topic, field,
+                                   *_masked(stamp, js.get(field), present, bit))
     del stamp, present
     if series['position'] is None:
         raise InputFileError(f'{path}: {js.topic} carries no finite position samples')
@@ -858,7 +884,9 @@ def _assemble(path: Path, reader: _Reader, names: Mapping[str, str]) -> Run:
         rs = ref.get('stamp')
         for field, key, bit in (('reference', 'position', cdr.HAS_POSITION),
                                 ('reference_velocity', 'velocity', cdr.HAS_VELOCITY)):
-            series[field] = _clean(path, ref.topic, key, *_masked(rs, ref.get(key), rp, bit))
+            if key not in ref.drop:
+                series[field] = _clean(path, ref.topic, key,
+                                       *_masked(rs, ref.get(key), rp, bit))
         del rp, rs
     volt = reader.topics.get(names['voltage'])
     if volt is not None and volt.count():

@@ -93,7 +93,7 @@ class Run:
                 raise InputFileError(f'{self.name}: missing {n} ({topic.get(n, n)})')
 
     def slice(self, t0: float, t1: float) -> 'Run':
-        """The samples with ``t0 <= t < t1``."""
+        """Return the samples with ``t0 <= t < t1``."""
         m = (self.t >= t0) & (self.t < t1)
         kw = {n: (None if getattr(self, n) is None else getattr(self, n)[m])
               for n in self.SIGNALS}

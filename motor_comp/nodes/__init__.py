@@ -1,0 +1,43 @@
+"""ROS 2 nodes: thin rclpy adapters over the core's step functions (DESIGN.md §5).
+
+=================  ===========================================  ======================
+node               calls (the only implementation of the law)   topics
+=================  ===========================================  ======================
+trajectory_node    ``Trajectory.at`` → compiled ``traj_eval``   pub ``reference``
+plant_node         ``Plant.step/measure`` → ``plant_advance``,  pub ``joint_states``,
+                   ``plant_measure``                            ``/clock``; sub
+                                                                ``voltage``
+controller_node    ``Controller.step`` → ``controller_step``    sub ``reference``,
+                                                                ``joint_states``; pub
+                                                                ``voltage``
+recorder_node      ``McapRecorder.write_cdr`` (raw CDR)         sub all of the above
+=================  ===========================================  ======================
+
+Topics live in the namespace ``axis`` (``--ros-args -r __ns:=/other`` for another
+axis); ``/clock`` is global.  ``reference`` carries the desired acceleration [m/s²] in
+``effort`` (JointState has no acceleration field; the adaptive law needs it).
+
+Lockstep protocol (deterministic, sim time on ``/clock``): the plant publishes
+``/clock`` t_k and ``joint_states``(t_k); the trajectory publishes the reference one
+period ahead (on tick k: r(t_{k+1})); the controller answers each measurement with
+exactly one command once the reference of the same stamp is there; the plant applies
+it for one period and publishes step k+1.  Before step 0 the plant waits until its
+peers have matched (controller and recorder subscribe ``joint_states`` only after their
+other inputs matched), so nodes can start in any order.  A lockstep run reproduces
+:func:`motor_comp.control.simulate` bit for bit.
+
+Realtime: wall-clock timers at the control rate (plant, trajectory); the controller
+answers each measurement.  A plant tick the machine delayed by whole periods is caught
+up with the held command, so sim time stays on the wall clock.
+
+QoS: reliable, depth 1000; publishers transient-local, subscribers volatile (so any
+ROS tool's publisher matches).  All nodes spin a :class:`~motor_comp.nodes.common.
+LeanLoop` (wait set over the hot subscriptions/timers) next to the executor, which
+serves parameter services and other timers.  SIGINT/SIGTERM stop every node cleanly;
+the recorder drains what is still arriving and finalises its MCAP.
+
+Run parameters in the MCAP: the recorder queries the other nodes' parameters through
+their parameter services and writes a ``params:<node>`` metadata record per node as
+soon as they answer; runtime changes (``/parameter_events``) go into a
+``parameter_changes`` record at the end.
+"""

@@ -18,8 +18,9 @@ readers of ``joint_states`` (controller + recorder by default) are matched, so n
 start in any order.  With ``duration`` > 0 the node exits after that much sim time.
 
 Realtime: after the same wait for peers, a wall-clock timer at ``control_rate``
-measures, publishes (stamped with the wall clock), and advances the axis with the
-latest command received (zero-order hold).
+measures and publishes (stamped with the wall clock); a command takes effect when it
+arrives (zero-order hold from its arrival, at the physics-step resolution), so the
+loop's delay is its real transport and computation time.
 
 A non-finite command never reaches the physics: it is refused with a warning and the
 step is taken at 0 V, so the loop goes on.
@@ -96,6 +97,10 @@ class PlantNode(ParamNode):
         self.published = 0
         self.late = 0
         self._t0_ns: int | None = None
+        self._tick_ns: int | None = None   # realtime: wall time of the last measurement
+        self._sub_done = 0                  # realtime: physics steps done in this period
+        self.n_sub = self.plant.substeps(self.dt)
+        self.phys_ns = self.dt_ns // self.n_sub
         self._finished = False
         self._started = False
         self._u = 0.0            # realtime: latest command (zero-order hold)
@@ -174,7 +179,7 @@ class PlantNode(ParamNode):
     def _on_voltage(self, msg: Float64) -> None:
         u = self._command(float(msg.data))
         if self.timing is Timing.REALTIME:
-            self._u = u
+            self._apply_realtime(u)
             return
         if not self._started or self._finished:
             return
@@ -190,34 +195,52 @@ class PlantNode(ParamNode):
 
     # -- realtime --------------------------------------------------------------------
     def _on_tick(self) -> None:
-        """Catch up with the wall clock, then measure and publish.
+        """Close the running period, catch up with the wall clock, measure and publish.
 
-        Sim time stays locked to wall time: if the machine delayed this tick by whole
-        periods, the axis is first advanced through them with the held command (the
-        controller could not have answered in between anyway).
+        Within a period the command in force is the latest received: a command that
+        arrives d after the tick's measurement takes effect d into the period (at the
+        physics-step resolution), so the loop's delay is the real transport and
+        computation time, not a whole period.  Sim time stays locked to wall time: if
+        the machine delayed a tick by whole periods, the axis is advanced through them
+        with the held command (no sample is published for them).
         """
         if self._finished:
             return
         now = self.get_clock().now().nanoseconds
         if self._t0_ns is None:
             self._t0_ns = now
+        else:
+            self._advance_substeps(self.n_sub - self._sub_done)
+            self.k += 1
         due = (now - self._t0_ns) // self.dt_ns
-        if self.n_steps > 0:
-            due = min(due, self.n_steps - 1)
-        while self.k < due:
+        while self.k < min(due, self.n_steps if self.n_steps > 0 else due):
             self.plant.measure(self.dt)   # keep the encoder's velocity per period
-            self._advance()
+            self._advance_substeps(self.n_sub)
+            self.k += 1
             self.late += 1
-        self._publish_measurement(now)
-        self._advance()
-        if self.n_steps > 0 and self.k >= self.n_steps:
+        if 0 < self.n_steps <= self.k:
             self._finished = True
             self.get_logger().info(f'run complete: {self.k} steps in realtime, '
                                    f'{self.late} periods caught up without a sample')
+            return
+        self._publish_measurement(now)
+        self._tick_ns = now
+        self._sub_done = 0
 
-    def _advance(self) -> None:
-        self.plant.step(self._u, self.dt, f_ext=self.plant.load.at(self.k * self.dt))
-        self.k += 1
+    def _apply_realtime(self, u: float) -> None:
+        """Run the period up to now with the old command, then hold ``u``."""
+        if self._tick_ns is not None and not self._finished:
+            elapsed = self.get_clock().now().nanoseconds - self._tick_ns
+            n = min(self.n_sub, int(elapsed // self.phys_ns))
+            if n > self._sub_done:
+                self._advance_substeps(n - self._sub_done)
+                self._sub_done = n
+        self._u = u
+
+    def _advance_substeps(self, n: int) -> None:
+        if n > 0:
+            self.plant.step(self._u, n * self.dt / self.n_sub,
+                            f_ext=self.plant.load.at(self.k * self.dt))
 
     # -- parameters ------------------------------------------------------------------
     def apply_params(self, changed: Mapping[str, Any], new: Mapping[str, Any]) -> None:

@@ -14,16 +14,36 @@ event: the step is integrated up to it, and the rest of the step is spent at res
 the net force exceeds the break-away level there, sliding the other way.  So the axis
 neither chatters through zero nor dwells at a reversal it should pass (a frictionless
 oscillator keeps its period).
+
+Speed (issue 7: ≥ 1000× real time in closed loop at 10 kHz): :func:`plant_advance` is
+one compiled function — its helpers are inlined at numba-IR level and read the
+per-advance constants from a tuple unpacked from ``P`` once, not from the arrays; the
+ripple at the start of a step (RK4 stage 1) is the one computed at the end of the
+previous step; ``1/M`` and ``1/vs`` are hoisted.  The exact special cases of the laws
+(Stribeck δ = 1, 2; ripple harmonics by angle addition) live in the effect modules, so
+the effects' own ``force`` methods use them too.  Run under ``NUMBA_DISABLE_JIT=1`` the
+same code is the pure-Python reference (checked against the compiled kernel by the
+tests).
 """
 from __future__ import annotations
+
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
 
 from motor_comp.physics.effects.backlash import play
-from motor_comp.physics.effects.presliding import MAX_ELEMENTS, gms_update
-from motor_comp.physics.effects.ripple import MAX_HARMONICS, ripple_force
-from motor_comp.physics.effects.stribeck import stribeck_magnitude
+from motor_comp.physics.effects.presliding import MAX_ELEMENTS, gms_step
+from motor_comp.physics.effects.ripple import MAX_HARMONICS, ripple_sum
+from motor_comp.physics.effects.stribeck import stribeck_level
+
+#: numba options of the kernel functions: cached on disk; numpy error model (no
+#: ZeroDivisionError branches: every divisor is validated > 0 when P is packed).
+#: Helpers of the step are inlined into :func:`plant_advance` at numba-IR level
+#: (``inline='always'``): a cached callee is linked as object code, which LLVM cannot
+#: inline, and passing the arrays P/S into a callee costs atomic reference counting.
+_JIT = {'cache': True, 'error_model': 'numpy'}
+_INLINE = dict(_JIT, inline='always')
 
 # ---- parameter vector P -----------------------------------------------------------
 P_MASS, P_GAIN, P_BEMF, P_DAMP = 0, 1, 2, 3
@@ -45,6 +65,9 @@ P_QUANT = P_F0 + 6                # encoder resolution [m]; 0 = ideal
 P_DT = P_F0 + 7                   # physics step [s]
 P_SIZE = P_F0 + 8
 
+# _axis below unpacks the ripple amplitudes as 16-tuples
+assert MAX_HARMONICS == 16, 'update _axis() for the new MAX_HARMONICS'
+
 # ---- state vector S ---------------------------------------------------------------
 S_X, S_V, S_XL, S_STUCK, S_T = 0, 1, 2, 3, 4
 S_FRICTION, S_RIPPLE, S_UEFF = 5, 6, 7   # last friction [N], ripple [N], applied command
@@ -56,29 +79,57 @@ S_DBUF = S_GMS_SLIP + MAX_ELEMENTS        # delay ring buffer follows
 S_BASE = S_DBUF
 
 
-@njit(cache=True)
-def _drive_force(P, x, v, u, f_ext):
-    """Every force except sliding friction [N]: drive minus smooth effects and load."""
-    f = P[P_GAIN] * (u - P[P_BEMF] * v) - (P[P_DAMP] + P[P_FV]) * v
-    nh = int(P[P_RIP_NH])
-    if nh > 0:
-        f -= ripple_force(x, P[P_RIP_PERIOD], P[P_RIP_A:P_RIP_A + nh], P[P_RIP_B:P_RIP_B + nh])
-    f -= P[P_F0] + P[P_SPRING_K] * (x - P[P_SPRING_X0]) + f_ext
-    f -= 0.5 * P[P_DFV] * abs(v)
+#: Per-advance constants unpacked from P once (scalars and fixed-size tuples are passed
+#: by value, so the inner step functions touch no array); names as the P layout.
+_Axis = namedtuple('_Axis', (
+    'gain', 'bemf', 'c_v', 'inv_mass', 'fc', 'fs', 'inv_vs', 'delta', 'half_dfc', 'half_dfv',
+    'nh', 'period', 'ra', 'rb', 'f0', 'k_spring', 'x0_spring', 'gms', 'dt'))
+
+
+@njit(**_INLINE)
+def _axis(P):
+    """Unpack the smooth-force and friction parameters of ``P`` into an ``_Axis``."""
+    i, j = P_RIP_A, P_RIP_B
+    ra = (P[i], P[i + 1], P[i + 2], P[i + 3], P[i + 4], P[i + 5], P[i + 6], P[i + 7],
+          P[i + 8], P[i + 9], P[i + 10], P[i + 11], P[i + 12], P[i + 13], P[i + 14],
+          P[i + 15])
+    rb = (P[j], P[j + 1], P[j + 2], P[j + 3], P[j + 4], P[j + 5], P[j + 6], P[j + 7],
+          P[j + 8], P[j + 9], P[j + 10], P[j + 11], P[j + 12], P[j + 13], P[j + 14],
+          P[j + 15])
+    return _Axis(P[P_GAIN], P[P_BEMF], P[P_DAMP] + P[P_FV], 1.0 / P[P_MASS], P[P_FC],
+                 P[P_FS], 1.0 / P[P_VS], P[P_DELTA], 0.5 * P[P_DFC], 0.5 * P[P_DFV],
+                 int(P[P_RIP_NH]), P[P_RIP_PERIOD], ra, rb, P[P_F0], P[P_SPRING_K],
+                 P[P_SPRING_X0], P[P_GMS_ON] > 0.5, P[P_DT])
+
+
+@njit(**_INLINE)
+def _ripple(A, x):
+    """Ripple force [N] at ``x`` [m] (0 without the effect)."""
+    if A.nh > 0:
+        return ripple_sum(x, A.period, A.ra, 0, A.rb, 0, A.nh)
+    return 0.0
+
+
+@njit(**_INLINE)
+def _drive_force(A, x, v, u, f_ext, rip):
+    """Every force except friction [N], given the ripple ``rip`` [N] at ``x``."""
+    f = A.gain * (u - A.bemf * v) - A.c_v * v
+    f -= rip
+    f -= A.f0 + A.k_spring * (x - A.x0_spring) + f_ext
+    f -= A.half_dfv * abs(v)
     return f
 
 
-@njit(cache=True)
-def _sliding_friction(P, v, d):
+@njit(**_INLINE)
+def _sliding_friction(A, v, d):
     """Static-model sliding friction [N] in direction ``d`` (±1) at velocity ``v``."""
-    shift = 0.5 * P[P_DFC]
-    fc = P[P_FC] + d * shift
-    fs = P[P_FS] + d * shift
-    return d * stribeck_magnitude(abs(v), fc, fs, P[P_VS], P[P_DELTA])
+    fc = A.fc + d * A.half_dfc
+    fs = A.fs + d * A.half_dfc
+    return d * stribeck_level(abs(v), fc, fs, A.inv_vs, A.delta)
 
 
-@njit(cache=True)
-def _breakaway(P, x, u, f_ext):
+@njit(**_INLINE)
+def _breakaway(A, x, u, f_ext, rip):
     """At rest at ``x``: direction (±1) in which the axis breaks away, or 0 if held.
 
     Returns ``(direction, net force [N])``; the break-away band is ``[−fs−, fs+]`` with
@@ -86,79 +137,67 @@ def _breakaway(P, x, u, f_ext):
     which the workbench may fit) counts as zero: rest with no net force stays rest, as
     the force laws say at v = 0, instead of breaking away on its own.
     """
-    f_net = _drive_force(P, x, 0.0, u, f_ext)
-    shift = 0.5 * P[P_DFC]
-    if f_net > max(P[P_FS] + shift, 0.0):
+    f_net = _drive_force(A, x, 0.0, u, f_ext, rip)
+    if f_net > max(A.fs + A.half_dfc, 0.0):
         return 1.0, f_net
-    if f_net < -max(P[P_FS] - shift, 0.0):
+    if f_net < -max(A.fs - A.half_dfc, 0.0):
         return -1.0, f_net
     return 0.0, f_net
 
 
-@njit(cache=True)
-def _accel(P, x, v, u, f_ext, f_fric):
-    return (_drive_force(P, x, v, u, f_ext) - f_fric) / P[P_MASS]
-
-
-@njit(cache=True)
-def _friction_at(P, v, d, x, x0, gms_force, k_stick):
+@njit(**_INLINE)
+def _friction_at(A, v, d, x, x0, gms_force, k_stick):
     """Friction [N] inside a step: static model in frozen direction ``d``, or GMS.
 
     GMS elements that stick act as springs during the step (``gms_force + k_stick·(x−x0)``);
     treating them as a frozen force instead would make the explicit scheme pump energy
     into the pre-sliding oscillation.
     """
-    if P[P_GMS_ON] > 0.5:
+    if A.gms:
         return gms_force + k_stick * (x - x0)
-    return _sliding_friction(P, v, d)
+    return _sliding_friction(A, v, d)
 
 
-@njit(cache=True)
-def _rk4_frozen(P, x, v, u, f_ext, d, gms_force, k_stick, dt):
-    """RK4 step of (x, v) with the friction direction ``d`` or the GMS state frozen."""
-    f1 = _friction_at(P, v, d, x, x, gms_force, k_stick)
-    k1x, k1v = v, _accel(P, x, v, u, f_ext, f1)
-    x2, v2 = x + 0.5 * dt * k1x, v + 0.5 * dt * k1v
-    f2 = _friction_at(P, v2, d, x2, x, gms_force, k_stick)
-    k2x, k2v = v2, _accel(P, x2, v2, u, f_ext, f2)
-    x3, v3 = x + 0.5 * dt * k2x, v + 0.5 * dt * k2v
-    f3 = _friction_at(P, v3, d, x3, x, gms_force, k_stick)
-    k3x, k3v = v3, _accel(P, x3, v3, u, f_ext, f3)
-    x4, v4 = x + dt * k3x, v + dt * k3v
-    f4 = _friction_at(P, v4, d, x4, x, gms_force, k_stick)
-    k4x, k4v = v4, _accel(P, x4, v4, u, f_ext, f4)
-    xn = x + dt / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
-    vn = v + dt / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
-    return xn, vn, (f1 + 2.0 * f2 + 2.0 * f3 + f4) / 6.0
+@njit(**_INLINE)
+def _rk4_frozen(A, x, v, u, f_ext, d, gms_force, k_stick, dt, rip):
+    """RK4 step of (x, v) with the friction direction ``d`` or the GMS state frozen.
+
+    ``rip`` is the ripple force at the start ``x``, which the caller already has.  The
+    four stages run as a loop (one inlined copy of the force laws instead of four; LLVM
+    unrolls it); the weighted sums accumulate in the order ``k1 + 2k2 + 2k3 + k4``.
+
+    Returns
+    -------
+    (x [m], v [m/s], stage-averaged friction [N])
+    """
+    xs, vs, r = x, v, rip
+    sum_x = 0.0
+    sum_v = 0.0
+    sum_f = 0.0
+    for stage in range(4):
+        if stage > 0:
+            r = _ripple(A, xs)
+        f = _friction_at(A, vs, d, xs, x, gms_force, k_stick)
+        a = (_drive_force(A, xs, vs, u, f_ext, r) - f) * A.inv_mass
+        w = 1.0 if stage == 0 or stage == 3 else 2.0
+        sum_x += w * vs
+        sum_v += w * a
+        sum_f += w * f
+        h = dt if stage == 2 else 0.5 * dt
+        xs, vs = x + h * vs, v + h * a
+    return x + dt / 6.0 * sum_x, v + dt / 6.0 * sum_v, sum_f / 6.0
 
 
-@njit(cache=True)
-def _delayed_command(P, S, u):
-    """Push ``u`` into the dead-time buffer and return ``u(t − τ)`` (linear interpolation)."""
-    steps = P[P_DELAY_STEPS]
-    nbuf = S.shape[0] - S_DBUF
-    if steps <= 0.0 or nbuf < 2:
-        return u
-    head = int(S[S_DHEAD])
-    head = (head + 1) % nbuf
-    S[S_DBUF + head] = u
-    S[S_DHEAD] = head
-    n0 = int(np.floor(steps))
-    frac = steps - n0
-    a = S[S_DBUF + (head - n0) % nbuf]
-    b = S[S_DBUF + (head - n0 - 1) % nbuf]
-    return (1.0 - frac) * a + frac * b
-
-
-@njit(cache=True)
-def _static_friction_step(P, x, v, u, f_ext, dt):
+@njit(**_INLINE)
+def _static_friction_step(A, x, v, u, f_ext, dt, rip):
     """One step of the static (Coulomb/Stribeck/viscous) friction model with stick–slip.
 
     Karnopp-style switch with event location: at rest the axis stays while the net force
     is inside the break-away band; while sliding, RK4 runs with the friction direction
     frozen, and if the velocity reaches zero inside the step the integration stops at the
     zero-crossing (located by linear interpolation of v, then integrated exactly up to
-    it) and the remaining time is spent stuck or sliding the other way.
+    it) and the remaining time is spent stuck or sliding the other way.  ``rip`` is the
+    ripple force [N] at the start ``x``.
 
     Returns
     -------
@@ -167,27 +206,52 @@ def _static_friction_step(P, x, v, u, f_ext, dt):
     t_left = dt
     impulse = 0.0                 # ∫ friction dt over the parts of the step done so far
     d = np.sign(v)
-    for _ in range(3):            # slide → rest → slide back; a third event ends at rest
-        if d == 0.0:
-            d, f_net = _breakaway(P, x, u, f_ext)
+    event = False                 # the next RK4 call integrates up to the zero crossing
+    tc = 0.0
+    rounds = 0
+    while rounds < 3:             # slide → rest → slide back; a third event ends at rest
+        if not event and d == 0.0:
+            d, f_net = _breakaway(A, x, u, f_ext, rip)
             if d == 0.0:          # static friction balances the net force
                 return x, 0.0, (impulse + f_net * t_left) / dt, 1.0
-        xn, vn, f = _rk4_frozen(P, x, v, u, f_ext, d, 0.0, 0.0, t_left)
-        if vn * d > 0.0:
-            return xn, vn, (impulse + f * t_left) / dt, 0.0
-        tc = t_left * v / (v - vn) if v != vn else 0.0
-        if tc > 0.0:
-            xn, _, f = _rk4_frozen(P, x, v, u, f_ext, d, 0.0, 0.0, tc)
+        # one call site for both spans keeps a single inlined copy of the RK4 stages
+        xn, vn, f = _rk4_frozen(A, x, v, u, f_ext, d, 0.0, 0.0, tc if event else t_left,
+                                rip)
+        if not event:
+            if vn * d > 0.0:
+                return xn, vn, (impulse + f * t_left) / dt, 0.0
+            tc = t_left * v / (v - vn) if v != vn else 0.0
+            if tc > 0.0:
+                event = True
+                continue
+        event = False
         impulse += f * tc
+        if xn != x:
+            rip = _ripple(A, xn)
         x, v, d = xn, 0.0, 0.0
         t_left -= tc
-    _, f_net = _breakaway(P, x, u, f_ext)
+        rounds += 1
+    _, f_net = _breakaway(A, x, u, f_ext, rip)
     return x, 0.0, (impulse + f_net * t_left) / dt, 1.0
 
 
-@njit(cache=True)
-def plant_substep(P, S, u, f_ext):
-    """Advance the axis by one physics step ``P[P_DT]`` with command ``u`` and load ``f_ext``.
+@njit(**_INLINE)
+def _delayed_command(S, u, nbuf, n0, frac):
+    """Push ``u`` into the dead-time ring buffer of ``S``; return ``u(t − τ)``.
+
+    ``τ = (n0 + frac)`` physics steps, linearly interpolated between buffer entries.
+    """
+    head = (int(S[S_DHEAD]) + 1) % nbuf
+    S[S_DBUF + head] = u
+    S[S_DHEAD] = head
+    a = S[S_DBUF + (head - n0) % nbuf]
+    b = S[S_DBUF + (head - n0 - 1) % nbuf]
+    return (1.0 - frac) * a + frac * b
+
+
+@njit(**_JIT)
+def plant_advance(P, S, u, f_ext, n_sub):
+    """Advance ``n_sub`` physics steps ``P[P_DT]`` holding command ``u`` and load ``f_ext``.
 
     Parameters
     ----------
@@ -199,54 +263,73 @@ def plant_substep(P, S, u, f_ext):
         Command [V] (or the model's input unit) before saturation and delay.
     f_ext : float
         External load force [N], subtracted like every effect force.
+    n_sub : int
+        Number of physics steps.
     """
-    dt = P[P_DT]
+    A = _axis(P)
+    dt = A.dt
     umax = P[P_UMAX]
     if u > umax:
         u = umax
     elif u < -umax:
         u = -umax
-    u = _delayed_command(P, S, u)
-    S[S_UEFF] = u
+    steps = P[P_DELAY_STEPS]
+    nbuf = S.shape[0] - S_DBUF
+    delayed = steps > 0.0 and nbuf >= 2
+    n0 = int(np.floor(steps))
+    frac = steps - n0
+    n_gms = int(P[P_GMS_N])
+    decay = np.exp(-P[P_GMS_C] * dt) if A.gms else 0.0
+    width = P[P_BACKLASH]
     x = S[S_X]
     v = S[S_V]
-    if P[P_GMS_ON] > 0.5:
-        n = int(P[P_GMS_N])
-        forces = S[S_GMS_F:S_GMS_F + n]
-        slip = S[S_GMS_SLIP:S_GMS_SLIP + n]
-        f_gms = np.sum(forces)
-        k_stick = 0.0
-        for i in range(n):
-            if slip[i] == 0.0:
-                k_stick += P[P_GMS_K + i]
-        xn, vn, _ = _rk4_frozen(P, x, v, u, f_ext, 0.0, f_gms, k_stick, dt)
-        # the elements follow the direction-dependent Stribeck curve (fc±, fs± of the
-        # asymmetry effect), so asymmetry acts on the dynamics, not only on the report
-        s_v = _sliding_friction(P, vn, np.sign(vn))
-        f_fric = gms_update(forces, slip, P[P_GMS_ALPHA:P_GMS_ALPHA + n],
-                            P[P_GMS_K:P_GMS_K + n], P[P_GMS_C], xn - x, vn, s_v, dt)
-    else:
-        xn, vn, f_fric, stuck = _static_friction_step(P, x, v, u, f_ext, dt)
-        S[S_STUCK] = stuck
-    S[S_X] = xn
-    S[S_V] = vn
-    S[S_FRICTION] = f_fric
-    nh = int(P[P_RIP_NH])
-    if nh > 0:
-        S[S_RIPPLE] = ripple_force(xn, P[P_RIP_PERIOD], P[P_RIP_A:P_RIP_A + nh],
-                                   P[P_RIP_B:P_RIP_B + nh])
-    S[S_XL] = play(xn, S[S_XL], P[P_BACKLASH])
-    S[S_T] += dt
-
-
-@njit(cache=True)
-def plant_advance(P, S, u, f_ext, n_sub):
-    """Advance ``n_sub`` physics steps holding command ``u`` [V] and load ``f_ext`` [N]."""
+    xl = S[S_XL]
+    t = S[S_T]
+    stuck = S[S_STUCK]
+    f_fric = S[S_FRICTION]
+    ueff = u
+    rip = _ripple(A, x)           # ripple at the step's start: stage 1 of every RK4 step
     for _ in range(n_sub):
-        plant_substep(P, S, u, f_ext)
+        if delayed:
+            ueff = _delayed_command(S, u, nbuf, n0, frac)
+        if A.gms:
+            f_gms = 0.0
+            k_stick = 0.0
+            for i in range(n_gms):
+                f_gms += S[S_GMS_F + i]
+                if S[S_GMS_SLIP + i] == 0.0:
+                    k_stick += P[P_GMS_K + i]
+            xn, vn, _ = _rk4_frozen(A, x, v, ueff, f_ext, 0.0, f_gms, k_stick, dt, rip)
+            # the elements follow the direction-dependent Stribeck curve (fc±, fs± of the
+            # asymmetry effect), so asymmetry acts on the dynamics, not only on the report
+            s_v = _sliding_friction(A, vn, np.sign(vn))
+            f_fric = gms_step(S, S_GMS_F, S, S_GMS_SLIP, P, P_GMS_ALPHA, P, P_GMS_K, n_gms,
+                              decay, xn - x, vn, s_v)
+        else:
+            xn, vn, f_fric, stuck = _static_friction_step(A, x, v, ueff, f_ext, dt, rip)
+        if xn != x:
+            rip = _ripple(A, xn)
+        x = xn
+        v = vn
+        xl = play(x, xl, width)
+        t += dt
+    S[S_X] = x
+    S[S_V] = v
+    S[S_XL] = xl
+    S[S_T] = t
+    S[S_STUCK] = stuck
+    S[S_FRICTION] = f_fric
+    S[S_RIPPLE] = rip
+    S[S_UEFF] = ueff
 
 
-@njit(cache=True)
+@njit(**_JIT)
+def plant_substep(P, S, u, f_ext):
+    """Advance the axis by one physics step ``P[P_DT]`` (see :func:`plant_advance`)."""
+    plant_advance(P, S, u, f_ext, 1)
+
+
+@njit(**_JIT)
 def plant_measure(P, S, noise, dt_meas):
     """Read the encoder: load position and its backward-difference velocity.
 

@@ -1,10 +1,12 @@
-"""The model workbench (DESIGN.md §6): compare a model with a run, see where it fails,
-learn which physical effect is missing, add it and watch the error fall.
+"""The model workbench (DESIGN.md §6): from a measured run to a better model.
+
+Compare a model with a run, see where it fails, learn which physical effect is
+missing, add it and watch the error fall.
 
 Pipeline: :func:`kinematics` (zero-phase derivatives) → :func:`residual` (inverse model
 ``r = F_in − M·ẍ − Σ F_k``) → :func:`diagnose` (candidate effects ranked on held-out
 time blocks) → :func:`fit` (add effects, refit all parameters); :func:`compare` adds the
-position view (k-step prediction, closed-loop replay).  Never imports rclpy.
+position view (k-step prediction, closed-loop replay).  Numpy core: no ROS imports.
 """
 from __future__ import annotations
 

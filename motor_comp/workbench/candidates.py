@@ -122,7 +122,13 @@ def fit_mass(ctx: FitContext, train: np.ndarray,
     """Mass/inertia mismatch: a residual ∝ acceleration, ``r ≈ ΔM·ẍ``."""
     a = ctx.res.a[:, None]
     theta, pred = _linear(ctx, a, train, smooth=False)
-    mass = max(ctx.model.mass + float(theta[0]), 1e-6 * ctx.model.mass)
+    m0 = ctx.model.mass
+    mass = m0 + float(theta[0])
+    # a non-positive mass is no physical finding (the residual anti-correlates with the
+    # acceleration for another reason), and beyond a factor 10 it is not a refinement
+    # but an unexcited inertia: then the mass stays (same rule as the joint refit)
+    if not 0.1 * m0 <= mass <= 10.0 * m0:
+        mass = m0
     pred = (mass - ctx.model.mass) * ctx.res.a
     return CandidateFit(MASS, {'mass': mass}, {'mass': mass}, pred, 1,
                         ctx.model.replace(mass=mass))

@@ -98,8 +98,9 @@ class Comparison:
         """``100·(1 − force NRMSE)``."""
         return 100.0 * (1.0 - self.force_nrmse)
 
-    def summary(self) -> str:
-        """Plain text for the terminal."""
+    def summary(self, *, rotary: bool = False) -> str:
+        """Plain text for the terminal (``rotary``: positions are angles, shown in mrad)."""
+        unit, k = ('mrad', 1e3) if rotary else ('µm', 1e6)
         p = self.prediction
         res = self.residual
         m = res.mask
@@ -110,15 +111,15 @@ class Comparison:
             f' RMS residual {np.sqrt(np.mean(res.r[m] ** 2)):.3g} N of RMS drive force '
             f'{np.std(res.f_in[m]):.3g} N',
             f'position, {1e3 * p.horizon:.0f} ms-ahead prediction: RMS error '
-            f'{1e6 * p.rms_error:.2f} µm, max {1e6 * p.max_error:.2f} µm '
+            f'{k * p.rms_error:.2f} {unit}, max {k * p.max_error:.2f} {unit} '
             f'(fit {p.fit_percent:.1f} % of the displacement)',
         ]
         if self.replay is not None:
             r = self.replay
             lines.append(f'closed-loop replay: RMS position difference '
-                         f'{1e6 * r.rms_difference:.2f} µm; tracking error RMS measured '
-                         f'{1e6 * r.rms_error_measured:.2f} µm vs model '
-                         f'{1e6 * r.rms_error_model:.2f} µm')
+                         f'{k * r.rms_difference:.2f} {unit}; tracking error RMS measured '
+                         f'{k * r.rms_error_measured:.2f} {unit} vs model '
+                         f'{k * r.rms_error_model:.2f} {unit}')
         else:
             lines.append(f'closed-loop replay: {self.replay_note}')
         return '\n'.join(lines)
@@ -198,12 +199,16 @@ def predict(kin: Kinematics, model: AxisModel, res: Residual | None = None, *,
                   origins, h, n_sub)
     meas = kin.position[origins + h]
     err = meas - pred
+    if not np.all(np.isfinite(err)):
+        # an unstable model (e.g. a negative stiffness) diverges: report it, do not crash
+        err = np.full_like(err, np.nan)
     disp = meas - kin.position[origins]
     den = float(np.linalg.norm(disp - disp.mean()))
     fit = 100.0 * (1.0 - float(np.linalg.norm(err)) / den) if den > 0 else float('nan')
     return Prediction(horizon=h * kin.dt, t=kin.t[origins + h], predicted=pred, measured=meas,
                       rms_error=float(np.sqrt(np.mean(err ** 2))),
-                      max_error=float(np.max(np.abs(err))), fit_percent=fit)
+                      max_error=float(np.max(np.abs(err))),
+                      fit_percent=fit if np.isfinite(fit) else float('nan'))
 
 
 def _literal(text: Any) -> Any:
@@ -238,8 +243,8 @@ def replay(run: Run, model: AxisModel) -> tuple[Replay | None, str]:
         mode = ControlMode.parse(str(meta['controller']))
         names = set(default_params(mode, cfg).as_dict())
         params = {k: _literal(meta[k]) for k in names if k in meta}
-        ctrl = make_controller(mode, plant=cfg, feedforward=str(meta.get('feedforward',
-                                                                          'none')), **params)
+        ff = str(meta.get('feedforward', 'none'))
+        ctrl = make_controller(mode, plant=cfg, feedforward=ff, **params)
         traj = trajectory_from_dict(dict(_literal(meta['trajectory'])))
         duration = len(run) / float(_literal(meta.get('control_rate_hz', 1.0 / np.median(
             np.diff(run.t)))))

@@ -178,7 +178,7 @@ class FitResult:
 
 def fit(kin: Kinematics, model: AxisModel, *, add: Sequence[str] = (), auto: bool = False,
         folds: int = 5, min_gain: float = 0.1, max_steps: int = 6,
-        progress: Callable[[str], None] | None = None) -> FitResult:
+        progress: Callable[[str], None] | None = None, rotary: bool = False) -> FitResult:
     """Add ``add`` (one step each) and, with ``auto``, repeat diagnose→add until none pays.
 
     Returns every step with its held-out force NRMSE; the first step is the starting
@@ -200,13 +200,21 @@ def fit(kin: Kinematics, model: AxisModel, *, add: Sequence[str] = (), auto: boo
         say(f'refit: force NRMSE {100 * nrmse:.1f} %')
     if auto:
         for _ in range(max_steps):
-            d = diagnose(kin, model, folds=folds, min_gain=min_gain)
+            d = diagnose(kin, model, folds=folds, min_gain=min_gain, rotary=rotary)
             best = d.best
             if best is None:
                 say('nothing else pays for its parameters: done')
                 break
-            say(f'diagnose: {best.sentence()}')
+            if best.effect == steps[-1].effect:
+                say(f'{best.effect} again: the refit did not settle it; stopping')
+                break
+            say(f'diagnose: {best.sentence(rotary=rotary)}')
             model = _step(kin, model, best.effect, mask, folds, steps, say)
+            if steps[-1].force_nrmse >= steps[-2].force_nrmse:
+                say('the held-out error did not fall: keeping the previous model')
+                steps.pop()
+                model = steps[-1].model
+                break
     return FitResult(steps=tuple(steps), model=model)
 
 

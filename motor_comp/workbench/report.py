@@ -76,6 +76,8 @@ def whiteness(kin: Kinematics, res: Residual, *, max_lag_s: float | None = None)
     # 25 lags as MATLAB resid's default, unless a span [s] is asked for
     max_lag = 25 if max_lag_s is None else int(max_lag_s / (step * kin.dt))
     max_lag = int(np.clip(max_lag, 5, n // 4))
+    # one zero-padded FFT gives both correlations with the same normalisation, in
+    # O(n log n); np.correlate would be O(n·lags) per signal
     nfft = 1 << int(np.ceil(np.log2(2 * n)))
     fr = np.fft.rfft(r, nfft)
     fu = np.fft.rfft(u, nfft)
@@ -130,9 +132,13 @@ def _plt():
     return plt
 
 
-def residual_figures(out: Path, kin: Kinematics, res: Residual, *, label: str = '') \
-        -> list[tuple[str, str]]:
-    """Write the residual views as PNGs in ``out``; return ``(file, caption)`` pairs."""
+def residual_figures(out: Path, kin: Kinematics, res: Residual, *, label: str = '',
+                     rotary: bool = False) -> list[tuple[str, str]]:
+    """Write the residual views as PNGs in ``out``; return ``(file, caption)`` pairs.
+
+    With ``rotary`` the position is an angle [rad] and the spectrum is drawn against
+    cycles per revolution.
+    """
     plt = _plt()
     m = res.mask
     figs: list[tuple[str, str]] = []
@@ -155,21 +161,31 @@ def residual_figures(out: Path, kin: Kinematics, res: Residual, *, label: str = 
     spec = spatial_spectrum(res.x[m], res.r[m])
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.2), dpi=90)
     c, mu, _ = binned(res.x[m], res.r[m], bins=200)
-    a1.plot(1e3 * res.x[m][::5], res.r[m][::5], '.', ms=1, color='0.6')
-    a1.plot(1e3 * c, mu, color='C3', lw=1.2, label='mean per position bin')
-    a1.set_xlabel('position [mm]')
+    k, xlabel = (1.0, 'angle [rad]') if rotary else (1e3, 'position [mm]')
+    a1.plot(k * res.x[m][::5], res.r[m][::5], '.', ms=1, color='0.6')
+    a1.plot(k * c, mu, color='C3', lw=1.2, label='mean per position bin')
+    a1.set_xlabel(xlabel)
     a1.set_ylabel('residual [N]')
     a1.set_title('Residual vs position')
     a1.legend(fontsize=8)
     f = spec.frequency[1:]
     keep = f <= 1.0 / (4 * spec.bin_width)
-    a2.semilogx(1e3 / f[keep], spec.amplitude[1:][keep], color='C0')
-    i = int(np.argmax(spec.amplitude[1:][keep]))
-    p = 1.0 / f[keep][i]
-    a2.axvline(1e3 * p, color='C3', ls='--', lw=0.8)
-    a2.annotate(f'{1e3 * p:.3g} mm', (1e3 * p, spec.amplitude[1:][keep][i]),
-                textcoords='offset points', xytext=(5, -10), fontsize=8, color='C3')
-    a2.set_xlabel('spatial period [mm]')
+    amp = spec.amplitude[1:][keep]
+    i = int(np.argmax(amp))
+    if rotary:
+        cyc = 2 * np.pi * f[keep]
+        a2.semilogx(cyc, amp, color='C0')
+        a2.axvline(cyc[i], color='C3', ls='--', lw=0.8)
+        a2.annotate(f'{cyc[i]:.3g} cycles/rev', (cyc[i], amp[i]), textcoords='offset points',
+                    xytext=(5, -10), fontsize=8, color='C3')
+        a2.set_xlabel('cycles per revolution')
+    else:
+        per = 1e3 / f[keep]
+        a2.semilogx(per, amp, color='C0')
+        a2.axvline(per[i], color='C3', ls='--', lw=0.8)
+        a2.annotate(f'{per[i]:.3g} mm', (per[i], amp[i]), textcoords='offset points',
+                    xytext=(5, -10), fontsize=8, color='C3')
+        a2.set_xlabel('spatial period [mm]')
     a2.set_ylabel('amplitude [N]')
     a2.set_title('Spatial spectrum of the residual')
     fig.tight_layout()

@@ -67,7 +67,7 @@ def force_nrmse(r: np.ndarray, f_in: np.ndarray) -> float:
 
 
 def sliding_mask(kin: Kinematics) -> np.ndarray:
-    """Samples where the axis slides: |ẋ| above five times its estimation noise.
+    """Select the samples where the axis slides: |ẋ| above 5× its estimation noise.
 
     The velocity noise of the Savitzky–Golay derivative is estimated from the position
     noise (or the encoder quantum when the noise is below it) and the filter's own
@@ -94,7 +94,7 @@ def _savgol_deriv_coeffs(window: int, polyorder: int) -> np.ndarray:
 
 
 def _stationary_runs(pos: np.ndarray, k_ext: int, eps: float) -> tuple[int, int]:
-    """The contiguous samples around ``k_ext`` whose position stays within ``eps``."""
+    """Return the contiguous samples around ``k_ext`` whose position stays within ``eps``."""
     ref = pos[k_ext]
     i0 = k_ext
     while i0 > 0 and abs(pos[i0 - 1] - ref) <= eps:
@@ -106,7 +106,7 @@ def _stationary_runs(pos: np.ndarray, k_ext: int, eps: float) -> tuple[int, int]
 
 
 def reversals(position: np.ndarray, hysteresis: float) -> list[tuple[int, int]]:
-    """Indices of the direction reversals of a position record.
+    """Find the direction reversals of a position record.
 
     A reversal is declared when the position has come back by more than ``hysteresis``
     [m] from its last extreme (a play operator on the measurement, so encoder flicker

@@ -25,7 +25,7 @@ class Session:
 
 
 def default_hold(model: AxisModel) -> InputHold:
-    """A voltage command is held by the controller; a logged current/force is sampled."""
+    """Choose the input hold: a voltage command is held, a logged current/force sampled."""
     return InputHold.ZOH if model.input is InputKind.VOLTAGE else InputHold.SAMPLE
 
 

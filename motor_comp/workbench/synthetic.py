@@ -76,7 +76,7 @@ def _u(rng: np.random.Generator, lo_hi: tuple[float, float]) -> float:
 
 
 def hidden_effect(name: str, rng: np.random.Generator) -> tuple[Any, dict]:
-    """An effect of the vocabulary with parameters drawn in :data:`RANGES`; its truth."""
+    """Draw an effect of the vocabulary with parameters in :data:`RANGES`; return its truth."""
     r = RANGES[name]
     sign = 1.0 if rng.random() < 0.5 else -1.0
     if name == 'coulomb':

@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 from motor_comp.errors import InputFileError
 from motor_comp.logs import Run, read_run, write_run
 
-_DIR = Path(tempfile.mkdtemp(prefix='motor_comp_fuzz_'))
+_TMP = tempfile.TemporaryDirectory(prefix='motor_comp_fuzz_')   # removed at exit
+_DIR = Path(_TMP.name)
 
 
 def _valid(compression: str) -> bytes:

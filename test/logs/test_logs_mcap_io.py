@@ -7,10 +7,13 @@ import signal
 import struct
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from mcap_ros2.writer import Writer as Ros2Writer
 
 from motor_comp.errors import InputFileError
@@ -325,3 +328,71 @@ def test_progress_only_when_asked(tmp_path: Path, capsys) -> None:
     read_run(path, progress=True)
     err = capsys.readouterr().err
     assert 'p.mcap:' in err and '100.0 %' in err and 'MB' in err
+
+
+@settings(max_examples=25, deadline=None)
+@given(frame=st.text(max_size=12),
+       others=st.lists(st.text(min_size=1, max_size=6), max_size=3),
+       where=st.integers(0, 3), with_vel=st.booleans(), with_eff=st.booleans(),
+       values=st.lists(st.floats(-1e3, 1e3), min_size=3, max_size=40))
+def test_any_joint_state_layout_decodes(frame, others, where, with_vel, with_eff,
+                                        values) -> None:
+    """Fast path, scanner and mcap_ros2's encoder agree for arbitrary layouts."""
+    others = [o for o in others if o != 'axis']
+    names = list(others)
+    j = min(where, len(names))
+    names.insert(j, 'axis')
+    import io
+    buf = io.BytesIO()
+    w = Ros2Writer(buf)
+    js = w.register_msgdef(schemas.JOINT_STATE, schemas.DEFINITIONS[schemas.JOINT_STATE])
+    for k, v in enumerate(values):
+        arr = [7.0] * len(names)
+        arr[j] = v
+        vel = [a * 2 for a in arr] if with_vel else []
+        eff = [a * 3 for a in arr] if with_eff else []
+        w.write_message('/axis/joint_states', js,
+                        _js(k * 10**6, arr, vel, eff, names=names, frame=frame),
+                        log_time=k * 10**6)
+    w.finish()
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / 'h.mcap'
+        path.write_bytes(buf.getvalue())
+        run = read_run(path)
+    np.testing.assert_array_equal(run.position, values)
+    if with_vel:
+        np.testing.assert_array_equal(run.velocity, np.array(values) * 2)
+    else:
+        assert run.velocity is None
+    if with_eff:
+        np.testing.assert_array_equal(run.effort, np.array(values) * 3)
+    else:
+        assert run.effort is None
+
+
+def test_recorder_rejects_misuse_with_named_errors(tmp_path: Path) -> None:
+    from motor_comp.errors import ParameterError
+    with McapRecorder(tmp_path / 'r.mcap') as rec:
+        with pytest.raises(ParameterError, match='/x: no message definition known'):
+            rec.add_channel('/x', 'my_msgs/msg/Thing')
+        with pytest.raises(ParameterError, match='add_channel'):
+            rec.write_cdr('/axis/voltage', b'\0\1\0\0' + bytes(8), 0)
+        cid = rec.add_channel('/x', 'my_msgs/Thing', definition='float64 a\n')
+        assert rec.add_channel('/x', 'my_msgs/Thing') == cid
+    with pytest.raises(InputFileError, match='cannot write'):
+        McapRecorder(tmp_path / 'missing_dir' / 'r.mcap')
+
+
+def test_only_requested_signals_are_kept(tmp_path: Path) -> None:
+    from motor_comp.errors import ParameterError
+    path = tmp_path / 's.mcap'
+    run = _sample_run(300)
+    write_run(path, run)
+    part = read_run(path, signals=('reference_velocity', 'voltage'))
+    assert part.velocity is None and part.effort is None and part.reference is None
+    np.testing.assert_array_equal(part.position, run.position)
+    np.testing.assert_array_equal(part.reference_velocity, run.reference_velocity)
+    np.testing.assert_array_equal(part.voltage, run.voltage)
+    assert read_run(path, signals=()).voltage is None
+    with pytest.raises(ParameterError, match='unknown'):
+        read_run(path, signals=('torque',))

@@ -174,3 +174,25 @@ def test_console_script_has_no_traceback(files, tmp_path):
     assert proc.returncode == 2
     assert 'Traceback' not in proc.stderr
     assert 'mass' in proc.stderr and np.size(proc.stderr.strip().splitlines()) == 1
+
+
+def test_tutorial_example_files_load():
+    from pathlib import Path
+
+    from motor_comp.physics.config import load_plant
+    docs = Path(__file__).resolve().parents[2] / 'docs'
+    for name in ('model.yaml', 'model_fitted.yaml', 'odrive_model.yaml',
+                 'odrive_model_fitted.yaml'):
+        AxisModel.load(docs / 'examples' / name)
+    plant = load_plant(docs / 'examples' / 'plant_hidden.yaml')
+    assert plant.model.has('ripple') and plant.model.has('stribeck')
+    fitted = AxisModel.load(docs / 'examples' / 'model_fitted.yaml')
+    # the tutorial's fitted ripple matches the hidden one (period within 1 %)
+    assert abs(fitted.get('ripple').period - plant.model.get('ripple').period) < \
+        0.01 * plant.model.get('ripple').period
+    text = (docs / 'tutorial.md').read_text()
+    for img in Path(docs / 'img').glob('*.png'):
+        assert img.stat().st_size < 120_000
+    for ref in ('img/before_residual_position.png', 'img/diagnose_candidates.png',
+                'img/odrive_residual_position.png'):
+        assert ref in text and (docs / ref).is_file()

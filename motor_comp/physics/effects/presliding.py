@@ -53,15 +53,28 @@ def gms_update(forces, slip, alpha, k, c, dx, v, s_v, dt):
     dt : float
         Step [s].
     """
+    return gms_step(forces, 0, slip, 0, alpha, 0, k, 0, alpha.shape[0], np.exp(-c * dt),
+                    dx, v, s_v)
+
+
+@njit(cache=True)
+def gms_step(forces, i_f, slip, i_s, alpha, i_a, k, i_k, n, decay, dx, v, s_v):
+    """Apply the element law of :func:`gms_update` to packed vectors with offsets.
+
+    ``F_i = forces[i_f + i]``, phase ``slip[i_s + i]``, ``α_i = alpha[i_a + i]``,
+    ``k_i = k[i_k + i]``; ``decay = e^{−c·dt}`` of the slip phase.  The plant kernel calls
+    this with its parameter and state vectors and offsets (no array views in its inner
+    loop, and the exponential hoisted out of the step loop); :func:`gms_update` with
+    the element arrays themselves.  Returns the summed element force [N].
+    """
     total = 0.0
     sv = np.sign(v)
-    decay = np.exp(-c * dt)
-    for i in range(alpha.shape[0]):
-        if slip[i] != 0.0 and sv != slip[i]:
-            slip[i] = 0.0  # velocity reversal (or rest): the element sticks again
-        if slip[i] == 0.0:
-            f = forces[i] + k[i] * dx
-            lim = alpha[i] * abs(s_v)
+    for i in range(n):
+        if slip[i_s + i] != 0.0 and sv != slip[i_s + i]:
+            slip[i_s + i] = 0.0  # velocity reversal (or rest): the element sticks again
+        if slip[i_s + i] == 0.0:
+            f = forces[i_f + i] + k[i_k + i] * dx
+            lim = alpha[i_a + i] * abs(s_v)
             # slip starts when F_i reaches α_i·s(v) in the direction of motion (Chiew
             # eq. 3–4).  An element still loaded against the motion (after a reversal
             # into a lower |s(v)|) keeps unloading elastically: clamping it to α_i|s(v)|
@@ -70,12 +83,12 @@ def gms_update(forces, slip, alpha, k, c, dx, v, s_v, dt):
             # moving carries no force instead of acting as an unlimited spring)
             if sv != 0.0 and abs(f) >= lim and np.sign(f) == sv:
                 f = np.sign(f) * lim
-                slip[i] = sv
-            forces[i] = f
+                slip[i_s + i] = sv
+            forces[i_f + i] = f
         else:
-            target = alpha[i] * s_v
-            forces[i] = target - (target - forces[i]) * decay
-        total += forces[i]
+            target = alpha[i_a + i] * s_v
+            forces[i_f + i] = target - (target - forces[i_f + i]) * decay
+        total += forces[i_f + i]
     return total
 
 

@@ -16,14 +16,38 @@ from motor_comp.physics.effects.base import Effect
 MAX_HARMONICS = 16
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always', error_model='numpy')
+def ripple_sum(x, period, a, ia, b, ib, nh):
+    """Ripple force [N] at ``x`` [m] with ``a_h = a[ia + h]``, ``b_h = b[ib + h]``, h < nh.
+
+    The law of the effect, shared by :func:`ripple_force` and the plant kernel (which
+    passes its packed parameter vector with offsets instead of slicing views off it in
+    the hot loop).  Harmonics h ≥ 2 come from the angle-addition recurrence
+    ``sin((h+1)θ) = sin hθ·cos θ + cos hθ·sin θ`` (and the cosine alike) on one sin/cos
+    pair: exact identities, rounding error growing like h·eps of the amplitude, instead
+    of a sin and a cos per harmonic; odd/even symmetry in ``x`` is kept bit for bit.
+    A single pure sine harmonic needs no cosine at all (exact special case).
+    """
+    th = 2.0 * np.pi / period * x
+    if nh == 1 and b[ib] == 0.0:
+        # one pure sine harmonic (Tan eq. 9 with B1 = 0, the PMLM default): the cosine
+        # term is exactly 0, and sin alone is cheaper than the sin/cos pair
+        return a[ia] * np.sin(th)
+    s1 = np.sin(th)
+    c1 = np.cos(th)
+    f = a[ia] * s1 + b[ib] * c1
+    s = s1
+    c = c1
+    for h in range(1, nh):
+        s, c = s * c1 + c * s1, c * c1 - s * s1
+        f = f + a[ia + h] * s + b[ib + h] * c
+    return f
+
+
+@njit(cache=True, error_model='numpy')
 def ripple_force(x, period, a, b):
     """Ripple force [N] at position ``x`` [m]; ``a``, ``b`` are sin/cos amplitudes [N]."""
-    w = 2.0 * np.pi / period
-    f = 0.0 * x
-    for h in range(a.shape[0]):
-        f = f + a[h] * np.sin((h + 1) * w * x) + b[h] * np.cos((h + 1) * w * x)
-    return f
+    return ripple_sum(x, period, a, 0, b, 0, a.shape[0])
 
 
 @dataclasses.dataclass(frozen=True)
