@@ -34,3 +34,4 @@ bench: $(STAMP)
 
 clean:
 	rm -rf build install log demo_out .pytest_cache
+	find motor_comp -name '*.nbi' -o -name '*.nbc' | xargs rm -f

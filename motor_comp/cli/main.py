@@ -18,17 +18,21 @@ from motor_comp.errors import MotorCompError
 
 #: subcommand modules under motor_comp.cli, in help order
 SUBCOMMANDS: tuple[str, ...] = (
-    'compare',
-    'diagnose',
-    'fit',
     'simulate',
     'sweep',
-    'analyze',
-    'import_cmd',
     'run',
     'replay',
     'demo',
+    'analyze',
+    'import_cmd',
+    'compare',
+    'diagnose',
+    'fit',
 )
+
+DESCRIPTION = ('Precision servo axes: simulate with friction, GMS pre-sliding and force '
+               'ripple; control (PID, adaptive sliding, N-PID + friction feedforward); run as '
+               'ROS 2 nodes recorded to MCAP; analyse runs; find what a model is missing.')
 
 
 class _Parser(argparse.ArgumentParser):
@@ -40,7 +44,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """Build the parser with every subcommand registered (or only the module ``only``)."""
-    parser = _Parser(prog='motor-comp', description=__doc__.splitlines()[0])
+    parser = _Parser(prog='motor-comp', description=DESCRIPTION)
     sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
     sub.required = True
     for name in (SUBCOMMANDS if only is None else (only,)):

@@ -266,6 +266,8 @@ def plant_advance(P, S, u, f_ext, n_sub):
     n_sub : int
         Number of physics steps.
     """
+    if n_sub <= 0:
+        return
     A = _axis(P)
     dt = A.dt
     umax = P[P_UMAX]
