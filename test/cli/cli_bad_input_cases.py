@@ -1,0 +1,468 @@
+"""Bad-input cases of every ``motor-comp`` command: the files, the argument lists, the outcome.
+
+Shared by ``test_cli_bad_input.py`` (which asserts the outcomes) and, run as a script,
+prints the Markdown table of ``docs/reliability.md`` from the real CLI's answers::
+
+    python test/cli/cli_bad_input_cases.py > /tmp/table.md
+
+Inputs are generated from one small, physically consistent run built with numpy (no
+simulation, so no numba compilation): a 2 s, 1 kHz sine move of the example PMLM model
+``docs/examples/model.yaml`` whose logged voltage is exactly the inverse model's.
+"""
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import io
+import os
+import stat
+import sys
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from motor_comp.logs import McapRecorder, Run, write_run
+from motor_comp.logs import cdr, schemas
+
+#: the example model of the tutorial (mass 5.4 kg, gain 130/8.6 N/V, back-EMF 123 V·s/m)
+MASS, GAIN, KE, FC, FV = 5.4, 130.0 / 8.6, 123.0, 10.0, 10.0
+MODEL_YAML = (f'input: voltage\ninput_gain: {GAIN!r}\nback_emf: {KE!r}\ndamping: 0.0\n'
+              f'mass: {MASS!r}\neffects:\n  coulomb: {{fc: {FC!r}}}\n'
+              f'  viscous: {{fv: {FV!r}}}\n')
+
+
+def good_run(duration: float = 2.0, rate: float = 1000.0) -> Run:
+    """A 5 mm, 1 Hz sine move and the voltage that drives it through the model exactly."""
+    t = np.arange(int(duration * rate)) / rate
+    w = 2 * np.pi
+    ref = 5e-3 * np.sin(w * t)
+    ref_v = 5e-3 * w * np.cos(w * t)
+    x = ref - 2e-6 * np.sin(2 * w * t)        # a small tracking error
+    v = 5e-3 * w * np.cos(w * t) - 4e-6 * w * np.cos(2 * w * t)
+    a = -5e-3 * w**2 * np.sin(w * t) + 8e-6 * w**2 * np.sin(2 * w * t)
+    force = MASS * a + FC * np.sign(v) + FV * v
+    u = force / GAIN + KE * v
+    return Run(t=t, position=x, velocity=v, reference=ref, reference_velocity=ref_v,
+               voltage=u, metadata={'generator': 'cli_bad_input_cases'}, name='good')
+
+
+def _write_unsorted(path: Path, run: Run, order: np.ndarray) -> None:
+    """Write ``run``'s messages in the order ``order`` (stamps may repeat or go back)."""
+    ns = np.round(run.t * 1e9).astype(np.int64)
+    js = cdr.encode_joint_states(ns, run.position, run.velocity)
+    rf = cdr.encode_joint_states(ns, run.reference, run.reference_velocity)
+    vo = cdr.encode_float64(run.voltage)
+    topics = schemas.topics('axis')
+    with McapRecorder(path, flush_interval=0.0) as rec:
+        for key, typ in (('reference', schemas.JOINT_STATE),
+                         ('joint_states', schemas.JOINT_STATE), ('voltage', schemas.FLOAT64)):
+            rec.add_channel(topics[key], typ)
+        for k, i in enumerate(order.tolist()):
+            log = int(ns[0] + k * 1_000_000)     # log times increase; the stamps do not
+            rec.write_cdr(topics['reference'], rf[i].tobytes(), log)
+            rec.write_cdr(topics['joint_states'], js[i].tobytes(), log)
+            rec.write_cdr(topics['voltage'], vo[i].tobytes(), int(ns[i]))
+
+
+def make_inputs(d: Path) -> Path:
+    """Write every good and bad input file into ``d``; return ``d``."""
+    run = good_run()
+    write_run(d / 'good.mcap', run)
+    (d / 'model.yaml').write_text(MODEL_YAML, encoding='utf-8')
+    # several small chunks, so that a truncated or damaged copy has a readable prefix
+    write_run(d / 'chunked.mcap', run, chunk_size=16 * 1024)
+    data = (d / 'chunked.mcap').read_bytes()
+    (d / 'truncated.mcap').write_bytes(data[:int(0.6 * len(data))])
+    (d / 'truncated_head.mcap').write_bytes(data[:40])
+    (d / 'empty.mcap').write_bytes(b'')
+    (d / 'text.mcap').write_text('this is not an MCAP file\n' * 20, encoding='utf-8')
+    (d / 'dir.mcap').mkdir()
+    magic = bytearray(data)
+    magic[1] ^= 0xFF
+    (d / 'badmagic.mcap').write_bytes(bytes(magic))
+    flipped = bytearray(data)
+    for k in range(int(0.7 * len(data)), int(0.7 * len(data)) + 64, 7):
+        flipped[k] ^= 0x5A                      # a damaged chunk 70 % into the file
+    (d / 'flipped.mcap').write_bytes(bytes(flipped))
+    write_run(d / 'novolt.mcap', dataclasses.replace(run, voltage=None))
+    write_run(d / 'noref.mcap', dataclasses.replace(run, reference=None,
+                                                    reference_velocity=None))
+    pos = run.position.copy()
+    pos[500:510] = np.nan
+    pos[900] = np.inf
+    write_run(d / 'nan.mcap', dataclasses.replace(run, position=pos))
+    write_run(d / 'allnan.mcap', dataclasses.replace(run, position=np.full(len(run), np.nan)))
+    volt = run.voltage.copy()
+    volt[:] = np.nan
+    write_run(d / 'nanvolt.mcap', dataclasses.replace(run, voltage=volt))
+    n = len(run)
+    order = np.arange(n)
+    order[1000:1010] = order[1000:1010][::-1]                  # 10 stamps go back
+    _write_unsorted(d / 'unsorted.mcap', run, order)
+    _write_unsorted(d / 'duplicated.mcap', run, np.repeat(np.arange(n), 2)[:n + n // 4])
+    # models
+    (d / 'malformed.yaml').write_text('mass: [1, 2\neffects: {\n', encoding='utf-8')
+    (d / 'negmass.yaml').write_text(MODEL_YAML.replace(f'mass: {MASS!r}', 'mass: -5.4'))
+    (d / 'zeromass.yaml').write_text(MODEL_YAML.replace(f'mass: {MASS!r}', 'mass: 0'))
+    (d / 'unknown_effect.yaml').write_text(MODEL_YAML + '  wobble: {a: 1.0}\n')
+    (d / 'badparam.yaml').write_text(MODEL_YAML.replace('fc: 10.0', 'fc: -3.0'))
+    (d / 'empty.yaml').write_text('')
+    (d / 'list.yaml').write_text('- 1\n- 2\n')
+    # tables for import
+    t, x, u = run.t, run.position, run.voltage
+    rows = '\n'.join(f'{a!r},{b!r},{c!r}' for a, b, c in zip(t, u, x))
+    (d / 'good.csv').write_text('t,u,x\n' + rows + '\n')
+    bad = rows.splitlines()
+    bad[41] = bad[41].rsplit(',', 1)[0] + ',abc'
+    (d / 'nonnumeric.csv').write_text('t,u,x\n' + '\n'.join(bad) + '\n')
+    (d / 'header_only.csv').write_text('t,u,x\n')
+    (d / 'empty.csv').write_text('')
+    (d / 'binary.csv').write_bytes(bytes(range(256)) * 4)
+    (d / 'table.xlsx').write_bytes(b'PK\x03\x04' + bytes(200))
+    (d / 'table.json').write_text('{"t": [0, 1], "u": [0, 1], "x": [0, 1]}\n')
+    (d / 'bad.mat').write_bytes(b'MATLAB 5.0 MAT-file' + bytes(50))
+    neg = '\n'.join(f'{a - 1.0!r},{b!r},{c!r}' for a, b, c in zip(t, u, x))
+    (d / 'negtime.csv').write_text('t,u,x\n' + neg + '\n')
+    # files standing where directories are expected, and the reverse
+    (d / 'afile').write_text('x')
+    (d / 'plant_bad.yaml').write_text('kind: pmlm\nmodel: {mass: -1}\n')
+    (d / 'grid_bad.yaml').write_text('grid: [1, 2]\n')
+    ro = d / 'readonly'
+    ro.mkdir()
+    ro.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    return d
+
+
+@dataclasses.dataclass(frozen=True)
+class Case:
+    """One command with one bad input and the outcome the user must see.
+
+    ``argv`` and ``names`` use ``{d}`` for the inputs' directory.  ``outcome`` is
+    ``'error'`` (exit 2, one ``motor-comp: error:`` line naming each of ``names``) or
+    ``'warn'`` (exit 0, a ``motor-comp: warning:`` line naming each of ``names``).
+    """
+
+    id: str
+    command: str
+    problem: str
+    argv: tuple[str, ...]
+    names: tuple[str, ...]
+    outcome: str = 'error'
+    subprocess: bool = False
+
+    def args(self, d: Path) -> list[str]:
+        """The argument list with ``{d}`` filled in."""
+        return [a.format(d=d) for a in self.argv]
+
+    def expected(self, d: Path) -> list[str]:
+        """The strings the message must contain."""
+        return [n.format(d=d) for n in self.names]
+
+
+def _c(id_: str, command: str, problem: str, argv: str, names: Sequence[str] = (), **kw
+       ) -> Case:
+    return Case(id_, command, problem, tuple(argv.split()), tuple(names), **kw)
+
+
+M = '--model {d}/model.yaml'
+WB = ('compare', 'diagnose', 'fit')
+
+
+def _run_file_cases() -> list[Case]:
+    """The MCAP damage every reading command must answer."""
+    files = [
+        ('missing', 'missing file', 'nope.mcap', ['nope.mcap', 'no such file']),
+        ('empty', 'zero-length file', 'empty.mcap', ['empty.mcap', 'empty']),
+        ('directory', 'a directory named .mcap', 'dir.mcap', ['dir.mcap', 'directory']),
+        ('text', 'a text file named .mcap', 'text.mcap', ['text.mcap', 'not an MCAP']),
+        ('badmagic', 'corrupt magic bytes', 'badmagic.mcap', ['badmagic.mcap', 'magic']),
+        ('trunc_head', 'truncated before any message', 'truncated_head.mcap',
+         ['truncated_head.mcap', 'no messages']),
+        ('allnan', 'only NaN positions', 'allnan.mcap', ['allnan.mcap', 'finite']),
+    ]
+    recoverable = [
+        ('truncated', 'truncated at 60 %', 'truncated.mcap',
+         ['truncated.mcap', 'recovered']),
+        ('flipped', 'bytes flipped at 70 %', 'flipped.mcap', ['flipped.mcap', 'recovered']),
+        ('nan', 'NaN/Inf position samples', 'nan.mcap', ['nan.mcap', '11 non-finite']),
+        ('unsorted', 'non-monotonic stamps', 'unsorted.mcap',
+         ['unsorted.mcap', 'out-of-order']),
+        ('duplicated', 'duplicated stamps', 'duplicated.mcap',
+         ['duplicated.mcap', 'duplicate stamps']),
+    ]
+    out: list[Case] = []
+    for cmd, extra in (('analyze', ''), ('compare', M), ('diagnose', M),
+                       ('fit', M + ' --add ripple'), ('replay', '--startup-delay 0')):
+        for key, problem, fname, names in files:
+            if cmd == 'replay' and key == 'allnan':
+                continue          # replay publishes the recorded bytes; NaN is data
+            out.append(_c(f'{cmd}-{key}', cmd, problem, f'{cmd} {{d}}/{fname} {extra}',
+                          names, subprocess=(key == 'truncated' or key == 'text')))
+        if cmd == 'replay':
+            continue
+        for key, problem, fname, names in recoverable:
+            out.append(_c(f'{cmd}-{key}', cmd, problem, f'{cmd} {{d}}/{fname} {extra}',
+                          names, outcome='warn', subprocess=(key == 'truncated')))
+    return out
+
+
+CASES: list[Case] = _run_file_cases() + [
+    # --- analyze
+    _c('analyze-noref', 'analyze', 'run without /axis/reference', 'analyze {d}/noref.mcap',
+       ['noref.mcap', 'reference']),
+    _c('analyze-window-neg', 'analyze', '--glitch-window -1',
+       'analyze {d}/good.mcap --glitch-window -1', ['--glitch-window', '-1']),
+    _c('analyze-window-nan', 'analyze', '--glitch-window nan',
+       'analyze {d}/good.mcap --glitch-window nan', ['--glitch-window', 'nan']),
+    _c('analyze-report-file', 'analyze', '--report into a file path',
+       'analyze {d}/good.mcap --report {d}/afile', ['{d}/afile']),
+    _c('analyze-report-missing', 'analyze', '--report in a non-existent directory',
+       'analyze {d}/good.mcap --report /nonexistent/dir/rep', ['/nonexistent/dir/rep']),
+    _c('analyze-option', 'analyze', 'unknown option', 'analyze {d}/good.mcap --bogus',
+       ['--bogus']),
+    # --- workbench
+    *[_c(f'{cmd}-novolt', cmd, 'run without /axis/voltage', f'{cmd} {{d}}/novolt.mcap {M}',
+         ['novolt.mcap', '/axis/voltage']) for cmd in WB],
+    *[_c(f'{cmd}-nanvolt', cmd, 'voltage all NaN', f'{cmd} {{d}}/nanvolt.mcap {M}',
+         ['nanvolt.mcap', '/axis/voltage']) for cmd in WB],
+    *[_c(f'{cmd}-csv', cmd, 'a CSV table instead of MCAP', f'{cmd} {{d}}/good.csv {M}',
+         ['good.csv', 'motor-comp import']) for cmd in WB],
+    *[_c(f'{cmd}-model-{key}', cmd, problem,
+         f'{cmd} {{d}}/good.mcap --model {{d}}/{fname}', [fname, *extra])
+      for cmd in WB for key, problem, fname, extra in (
+          ('missing', 'missing model file', 'nomodel.yaml', []),
+          ('malformed', 'malformed model YAML', 'malformed.yaml', []),
+          ('negmass', 'negative mass', 'negmass.yaml', ['mass']),
+          ('zeromass', 'zero mass', 'zeromass.yaml', ['mass']),
+          ('unknown', 'unknown effect name', 'unknown_effect.yaml', ['wobble']),
+          ('badparam', 'negative Coulomb level', 'badparam.yaml', ['fc']),
+          ('emptyyaml', 'empty model file', 'empty.yaml', []),
+          ('list', 'model file is a list', 'list.yaml', []),
+          ('dir', 'model path is a directory', '', []))],
+    *[_c(f'{cmd}-option', cmd, 'unknown option', f'{cmd} {{d}}/good.mcap {M} --bogus',
+         ['--bogus'], subprocess=cmd == 'compare') for cmd in WB],
+    *[_c(f'{cmd}-window-nan', cmd, '--window nan', f'{cmd} {{d}}/good.mcap {M} --window nan',
+         ['--window', 'nan']) for cmd in WB],
+    *[_c(f'{cmd}-report-file', cmd, '--report into a file path',
+         f'{cmd} {{d}}/good.mcap {M} --report {{d}}/afile', ['{d}/afile'])
+      for cmd in ('compare', 'diagnose')],
+    _c('diagnose-report-readonly', 'diagnose', '--report in a read-only directory',
+       f'diagnose {{d}}/good.mcap {M} --report {{d}}/readonly/rep', ['{d}/readonly/rep']),
+    _c('diagnose-min-gain', 'diagnose', '--min-gain 1.5',
+       f'diagnose {{d}}/good.mcap {M} --min-gain 1.5', ['--min-gain']),
+    _c('diagnose-folds', 'diagnose', '--folds 1', f'diagnose {{d}}/good.mcap {M} --folds 1',
+       ['--folds']),
+    _c('fit-add-unknown', 'fit', 'unknown effect for --add',
+       f'fit {{d}}/good.mcap {M} --add wobble', ['--add', 'wobble']),
+    _c('fit-add-present', 'fit', '--add an effect the model has',
+       f'fit {{d}}/good.mcap {M} --add coulomb', ['coulomb']),
+    _c('fit-output-missing-dir', 'fit', '-o in a non-existent directory',
+       f'fit {{d}}/good.mcap {M} --add offset -o /nonexistent/dir/new.yaml',
+       ['/nonexistent/dir/new.yaml']),
+    _c('fit-output-dir', 'fit', '-o is a directory',
+       f'fit {{d}}/good.mcap {M} --add offset -o {{d}}/dir.mcap', ['{d}/dir.mcap']),
+    # --- import
+    _c('import-missing', 'import', 'missing file',
+       'import {d}/nope.csv --time t --input u --position x -o {d}/o.mcap', ['nope.csv'],
+       subprocess=True),
+    _c('import-column', 'import', 'missing column',
+       'import {d}/good.csv --time t --input volts --position x -o {d}/o.mcap',
+       ['good.csv', 'volts', '--input']),
+    _c('import-index', 'import', 'column index out of range',
+       'import {d}/good.csv --time 0 --input 1 --position 7 -o {d}/o.mcap',
+       ['good.csv', '--position', '7']),
+    _c('import-nonnumeric', 'import', 'non-numeric cell',
+       'import {d}/nonnumeric.csv --time t --input u --position x -o {d}/o.mcap',
+       ['nonnumeric.csv', 'line 43', "'abc'"]),
+    _c('import-header-only', 'import', 'header but no rows',
+       'import {d}/header_only.csv --time t --input u --position x -o {d}/o.mcap',
+       ['header_only.csv', 'no data rows']),
+    _c('import-empty', 'import', 'zero-length file',
+       'import {d}/empty.csv --time t --input u --position x -o {d}/o.mcap',
+       ['empty.csv', 'empty']),
+    _c('import-binary', 'import', 'binary file named .csv',
+       'import {d}/binary.csv --time t --input u --position x -o {d}/o.mcap',
+       ['binary.csv']),
+    _c('import-xlsx', 'import', 'unsupported extension .xlsx',
+       'import {d}/table.xlsx --time t --input u --position x -o {d}/o.mcap',
+       ['table.xlsx', '.xlsx']),
+    _c('import-json', 'import', 'unsupported extension .json',
+       'import {d}/table.json --time t --input u --position x -o {d}/o.mcap',
+       ['table.json', '.json']),
+    _c('import-mat', 'import', 'corrupt .mat file',
+       'import {d}/bad.mat --time t --input u --position x -o {d}/o.mcap', ['bad.mat']),
+    _c('import-negtime', 'import', 'negative time stamps',
+       'import {d}/negtime.csv --time t --input u --position x -o {d}/o.mcap',
+       ['negtime.csv', '--time-offset']),
+    _c('import-out-missing-dir', 'import', '-o in a non-existent directory',
+       'import {d}/good.csv --time t --input u --position x -o /nonexistent/dir/x.mcap',
+       ['/nonexistent/dir/x.mcap']),
+    _c('import-out-readonly', 'import', '-o in a read-only directory',
+       'import {d}/good.csv --time t --input u --position x -o {d}/readonly/x.mcap',
+       ['{d}/readonly/x.mcap']),
+    _c('import-out-dir', 'import', '-o is a directory',
+       'import {d}/good.csv --time t --input u --position x -o {d}/dir.mcap',
+       ['{d}/dir.mcap']),
+    _c('import-scale-nan', 'import', '--position-scale nan',
+       'import {d}/good.csv --time t --input u --position x --position-scale nan -o '
+       '{d}/o.mcap', ['--position-scale', 'nan']),
+    _c('import-no-time', 'import', 'required option missing',
+       'import {d}/good.csv --input u --position x -o {d}/o.mcap', ['--time']),
+    # --- simulate (module owned by the lead; its bad-input behaviour is checked here)
+    _c('simulate-duration-neg', 'simulate', '--duration -1', 'simulate --duration -1',
+       ['--duration', '-1'], subprocess=True),
+    _c('simulate-duration-nan', 'simulate', '--duration nan', 'simulate --duration nan',
+       ['--duration', 'nan']),
+    _c('simulate-plant-missing', 'simulate', 'nonexistent --plant file',
+       'simulate --duration 0.1 --plant {d}/noplant.yaml', ['noplant.yaml']),
+    _c('simulate-plant-bad', 'simulate', 'plant file with negative mass',
+       'simulate --duration 0.1 --plant {d}/plant_bad.yaml', ['plant_bad.yaml']),
+    _c('simulate-set-unknown', 'simulate', '--set unknown parameter',
+       'simulate --duration 0.1 --set wobble=3', ['wobble']),
+    _c('simulate-set-bad', 'simulate', '--set bad value',
+       'simulate --duration 0.1 --set kp=abc', ['kp']),
+    _c('simulate-set-nan', 'simulate', '--set NaN value',
+       'simulate --duration 0.1 --set kp=nan', ['kp']),
+    _c('simulate-out-missing-dir', 'simulate', '-o in a non-existent directory',
+       'simulate --duration 0.05 -o /nonexistent/dir/x.mcap', ['/nonexistent/dir/x.mcap']),
+    _c('simulate-option', 'simulate', 'unknown option', 'simulate --bogus', ['--bogus']),
+    # --- sweep
+    _c('sweep-duration-neg', 'sweep', '--duration -1', 'sweep --duration -1 --grid kp=1,2',
+       ['--duration', '-1'], subprocess=True),
+    _c('sweep-no-grid', 'sweep', 'nothing to sweep', 'sweep --duration 0.1', ['--grid']),
+    _c('sweep-grid-syntax', 'sweep', 'malformed --grid', 'sweep --duration 0.1 --grid kp',
+       ['--grid', 'kp']),
+    _c('sweep-grid-unknown', 'sweep', '--grid unknown parameter',
+       'sweep --duration 0.1 --grid wobble=1,2', ['wobble']),
+    _c('sweep-grid-bad-value', 'sweep', '--grid bad value',
+       'sweep --duration 0.1 --grid kp=abc,2', ['kp']),
+    _c('sweep-set-unknown', 'sweep', '--set unknown parameter',
+       'sweep --duration 0.1 --grid kp=1,2 --set wobble=3', ['wobble']),
+    _c('sweep-plant-missing', 'sweep', 'nonexistent --plant file',
+       'sweep --duration 0.1 --grid kp=1,2 --plant {d}/noplant.yaml', ['noplant.yaml']),
+    _c('sweep-grid-file-missing', 'sweep', 'missing --grid-file',
+       'sweep --duration 0.1 --grid-file {d}/nogrid.yaml', ['nogrid.yaml']),
+    _c('sweep-grid-file-bad', 'sweep', '--grid-file without a grid mapping',
+       'sweep --duration 0.1 --grid-file {d}/grid_bad.yaml', ['grid_bad.yaml', 'grid']),
+    _c('sweep-window-nan', 'sweep', '--glitch-window nan',
+       'sweep --duration 0.1 --grid kp=1,2 --glitch-window nan', ['--glitch-window']),
+    _c('sweep-workers', 'sweep', '--workers 0', 'sweep --duration 0.1 --grid kp=1,2 '
+       '--workers 0', ['--workers']),
+    _c('sweep-csv-missing-dir', 'sweep', '--csv in a non-existent directory',
+       'sweep --duration 0.1 --grid kp=1,2 --csv /nonexistent/dir/t.csv',
+       ['/nonexistent/dir/t.csv']),
+    # --- run (checked before any node process starts)
+    _c('run-duration-neg', 'run', '--duration -1', 'run --duration -1 -o {d}/r.mcap',
+       ['--duration', '-1'], subprocess=True),
+    _c('run-duration-nan', 'run', '--duration nan', 'run --duration nan -o {d}/r.mcap',
+       ['--duration', 'nan']),
+    _c('run-rate-neg', 'run', '--rate -5', 'run --rate -5 -o {d}/r.mcap', ['--rate', '-5']),
+    _c('run-rate-nan', 'run', '--rate nan', 'run --rate nan -o {d}/r.mcap', ['--rate', 'nan']),
+    _c('run-rate-text', 'run', '--rate abc', 'run --rate abc -o {d}/r.mcap', ['--rate', 'abc']),
+    _c('run-timeout', 'run', '--timeout 0', 'run --timeout 0 -o {d}/r.mcap', ['--timeout']),
+    _c('run-plant-missing', 'run', 'nonexistent --plant file',
+       'run --plant {d}/noplant.yaml -o {d}/r.mcap', ['noplant.yaml']),
+    _c('run-out-missing-dir', 'run', '-o in a non-existent directory',
+       'run -o /nonexistent/dir/x.mcap', ['/nonexistent/dir']),
+    _c('run-out-dir', 'run', '-o is a directory', 'run -o {d}/dir.mcap', ['{d}/dir.mcap']),
+    _c('run-out-readonly', 'run', '-o in a read-only directory',
+       'run -o {d}/readonly/x.mcap', ['{d}/readonly/x.mcap']),
+    _c('run-domain', 'run', '--domain-id 999', 'run --domain-id 999 -o {d}/r.mcap',
+       ['--domain-id']),
+    _c('run-no-output', 'run', 'required -o missing', 'run', ['-o']),
+    # --- replay (checked before rclpy starts)
+    _c('replay-rate-neg', 'replay', '--rate -1', 'replay {d}/good.mcap --rate -1',
+       ['--rate', '-1']),
+    _c('replay-rate-nan', 'replay', '--rate nan', 'replay {d}/good.mcap --rate nan',
+       ['--rate', 'nan']),
+    _c('replay-rate-text', 'replay', '--rate abc', 'replay {d}/good.mcap --rate abc',
+       ['--rate', 'abc']),
+    _c('replay-delay-nan', 'replay', '--startup-delay nan',
+       'replay {d}/good.mcap --startup-delay nan', ['--startup-delay']),
+    _c('replay-option', 'replay', 'unknown option', 'replay {d}/good.mcap --bogus',
+       ['--bogus']),
+    # --- demo (checked before any node process starts)
+    _c('demo-duration-neg', 'demo', '--pmlm-duration -1',
+       'demo --out {d}/demo --pmlm-duration -1', ['--pmlm-duration'], subprocess=True),
+    _c('demo-duration-nan', 'demo', '--ballscrew-duration nan',
+       'demo --out {d}/demo --ballscrew-duration nan', ['--ballscrew-duration']),
+    _c('demo-out-file', 'demo', '--out is a file', 'demo --out {d}/afile', ['{d}/afile']),
+    _c('demo-only-unknown', 'demo', '--only unknown run', 'demo --out {d}/demo --only nope',
+       ['--only', 'nope']),
+    # --- the dispatcher
+    _c('main-unknown-command', 'main', 'unknown command', 'frobnicate',
+       ['frobnicate'], subprocess=True),
+]
+
+
+def _fix_dir_model(case: Case) -> Case:
+    """The 'model path is a directory' cases point --model at ``dir.mcap``."""
+    if case.id.endswith('-model-dir'):
+        argv = tuple('{d}/dir.mcap' if a == '{d}/' else a for a in case.argv)
+        return dataclasses.replace(case, argv=argv, names=('{d}/dir.mcap',))
+    return case
+
+
+CASES = [_fix_dir_model(c) for c in CASES]
+
+
+@dataclasses.dataclass(frozen=True)
+class Outcome:
+    """What the user saw."""
+
+    status: int
+    stdout: str
+    stderr: str
+
+
+def run_in_process(argv: list[str]) -> Outcome:
+    """Run ``motor-comp argv`` in this process (argparse exits become a status)."""
+    from motor_comp.cli.main import main
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            status = main(argv)
+        except SystemExit as exc:
+            status = exc.code if isinstance(exc.code, int) else 1
+    return Outcome(status, out.getvalue(), err.getvalue())
+
+
+def run_subprocess(argv: list[str], env: dict[str, str] | None = None) -> Outcome:
+    """Run ``python -m motor_comp.cli.main argv`` as a process."""
+    import subprocess
+    e = dict(os.environ if env is None else env)
+    e.pop('MOTOR_COMP_DEBUG', None)
+    e.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    e.setdefault('ROS_DOMAIN_ID', str(150 + os.getpid() % 50))
+    p = subprocess.run([sys.executable, '-m', 'motor_comp.cli.main', *argv],
+                       capture_output=True, text=True, timeout=180, env=e,
+                       stdin=subprocess.DEVNULL)
+    return Outcome(p.returncode, p.stdout, p.stderr)
+
+
+def markdown_table(d: Path, runner: Callable[[list[str]], Outcome] = run_in_process) -> str:
+    """The table of ``docs/reliability.md``: command, bad input, message, exit status."""
+    lines = ['| command | bad input | what the user sees (stderr, abbreviated) | exit |',
+             '|---|---|---|---|']
+    for case in CASES:
+        o = runner(case.args(d))
+        msg = [ln for ln in o.stderr.strip().splitlines()
+               if ln.startswith('motor-comp:')]
+        text = ' / '.join(msg).replace(str(d) + '/', '').replace(str(d), '.')
+        if len(text) > 170:
+            text = text[:167] + '…'
+        text = text.replace('|', '\\|')
+        cmd = 'import' if case.command == 'import' else case.command
+        lines.append(f'| {cmd} | {case.problem} | `{text}` | {o.status} |')
+    return '\n'.join(lines)
+
+
+if __name__ == '__main__':
+    import tempfile
+    with tempfile.TemporaryDirectory(prefix='mc_bad_') as tmp:
+        root = make_inputs(Path(tmp))
+        try:
+            print(markdown_table(root))
+        finally:
+            (root / 'readonly').chmod(stat.S_IRWXU)
