@@ -8,10 +8,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
-from typing import Any
-
+from motor_comp.cli.common import add_json, add_report, jsonable, positive_float
 from motor_comp.errors import ParameterError
 
 
@@ -21,45 +19,25 @@ _POLICY = ('Input handling: messages are aligned onto the /axis/joint_states sta
            'damaged file is read up to the damage. Each case prints a warning on stderr.')
 
 
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f'must be a finite number > 0, got {text!r}')
-    return v
-
-
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``analyze`` subcommand."""
     p = subparsers.add_parser(
         'analyze', help='tracking error and quadrant glitches of recorded runs',
         description=__doc__.splitlines()[0], epilog=_POLICY)
     p.add_argument('runs', nargs='+', metavar='RUN.mcap', help='MCAP runs (first = baseline)')
-    p.add_argument('--glitch-window', type=_positive, default=0.2, metavar='S',
+    p.add_argument('--glitch-window', type=positive_float, default=0.2, metavar='S',
                    help='window W after each reference reversal [s] (default 0.2)')
-    p.add_argument('--settle-band', type=_positive, default=None, metavar='M',
+    p.add_argument('--settle-band', type=positive_float, default=None, metavar='M',
                    help='absolute settling band for point-to-point moves [m] '
                         '(default 2%% of the move)')
-    p.add_argument('--chatter-cutoff', type=_positive, default=100.0, metavar='HZ',
+    p.add_argument('--chatter-cutoff', type=positive_float, default=100.0, metavar='HZ',
                    help='voltage content above this frequency counts as chattering [Hz]')
     p.add_argument('--namespace', default='axis', help='topic namespace (default axis)')
-    p.add_argument('--json', action='store_true', help='print one JSON object on stdout')
-    p.add_argument('--report', metavar='DIR', help='write figures and index.html here')
+    add_json(p)
+    add_report(p, help='write figures and index.html here')
     p.add_argument('--progress', action='store_true',
                    help='show reading progress on stderr (default: only on a terminal)')
     p.set_defaults(func=run)
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    return x
 
 
 def run(args: argparse.Namespace) -> int:
@@ -72,7 +50,8 @@ def run(args: argparse.Namespace) -> int:
     runs, metrics = [], []
     for path in args.runs:
         r = read_run(path, progress=progress, namespace=args.namespace,
-                     signals=('reference', 'reference_velocity', 'voltage'))
+                     signals=('reference', 'reference_velocity', 'voltage'),
+                     require={'reference': 'the tracking error is reference − position'})
         runs.append(r)
         try:
             metrics.append(compute_metrics(r, glitch_window=args.glitch_window,
@@ -97,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         out = {'runs': entries, 'glitch_window': args.glitch_window}
         if report is not None:
             out['report'] = str(report)
-        print(json.dumps(_jsonable(out), allow_nan=False))
+        print(json.dumps(jsonable(out), allow_nan=False))
     else:
         print(format_table(metrics))
         if report is not None:

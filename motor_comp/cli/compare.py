@@ -9,27 +9,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from typing import Any
 
-
-def positive_float(text: str) -> float:
-    """Argparse type: a finite number > 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f'must be a finite number > 0, got {text!r}')
-    return v
+from motor_comp.cli.common import add_json, add_report, jsonable, positive_float
 
 
 def add_common(p: argparse.ArgumentParser) -> None:
     """Arguments shared by compare, diagnose and fit."""
     p.add_argument('run', metavar='RUN.mcap', help='measured run (MCAP; import CSV/MAT first)')
     p.add_argument('--model', required=True, metavar='MODEL.yaml', help='model file')
-    p.add_argument('--json', action='store_true', help='print one JSON object to stdout')
+    add_json(p, help='print one JSON object to stdout')
     p.add_argument('--window', type=positive_float, default=0.02, metavar='S',
                    help='zero-phase derivative window [s] (default 0.02)')
     p.add_argument('--input-hold', choices=('zoh', 'sample'), default=None,
@@ -45,7 +35,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser('compare', help='compare a model with a measured run',
                               description=__doc__.splitlines()[0])
     add_common(p)
-    p.add_argument('--report', metavar='DIR', help='write PNG figures and index.html here')
+    add_report(p)
     p.add_argument('--horizon', type=positive_float, default=0.02, metavar='S',
                    help='position prediction horizon [s] (default 0.02)')
     p.set_defaults(func=run)
@@ -78,18 +68,7 @@ def run(args: argparse.Namespace) -> int:
         figs.append(rep.prediction_figure(out, s.kin, cmp.prediction))
         page = rep.write_html(out, f'compare: {s.kin.name} vs {args.model}', text, figs)
         data['report'] = str(page)
-    emit(args, _finite(data), text)
+    emit(args, jsonable(data), text)
     if args.report:
         print(f'report: {data["report"]}', file=sys.stderr)
     return 0
-
-
-def _finite(obj: Any) -> Any:
-    """Replace non-finite floats by None (JSON has no NaN)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    return obj

@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from motor_comp.cli.common import add_json, positive_float
 from motor_comp.cli.run import RunSpec, metrics_row, print_table, run_nodes
 from motor_comp.errors import InputFileError, ParameterError
 
@@ -60,13 +61,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                               description=__doc__.splitlines()[0])
     p.add_argument('--out', type=Path, default=Path('demo_out'),
                    help='output directory (created; default demo_out)')
-    p.add_argument('--pmlm-duration', type=float, default=4.0,
+    p.add_argument('--pmlm-duration', type=positive_float, default=4.0,
                    help='sim seconds of each PMLM run (default 4: two out-and-back moves)')
-    p.add_argument('--ballscrew-duration', type=float, default=8.0,
+    p.add_argument('--ballscrew-duration', type=positive_float, default=8.0,
                    help='sim seconds of each ball-screw run (default 8: four reversals)')
     p.add_argument('--only', nargs='*', choices=[r[0] for r in RUNS],
                    help='run only these (default: all six)')
-    p.add_argument('--json', action='store_true', help='print one JSON object')
+    add_json(p, help='print one JSON object')
     p.set_defaults(func=run)
 
 

@@ -11,7 +11,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from motor_comp.cli.compare import _finite, add_common, emit, positive_float
+from motor_comp.cli.common import add_report, jsonable, positive_float
+from motor_comp.cli.compare import add_common, emit
 
 
 def fraction(text: str) -> float:
@@ -37,7 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                               description=__doc__.splitlines()[0])
     add_common(p)
     add_diagnose_options(p)
-    p.add_argument('--report', metavar='DIR', help='write PNG figures and index.html here')
+    add_report(p)
     p.set_defaults(func=run)
 
 
@@ -56,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         figs.insert(0, rep.candidates_figure(out, d.candidates))
         page = rep.write_html(out, f'diagnose: {s.kin.name} with {args.model}', text, figs)
         data['report'] = str(page)
-    emit(args, _finite(data), text)
+    emit(args, jsonable(data), text)
     if args.report:
         print(f'report: {data["report"]}', file=sys.stderr)
     return 0

@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from motor_comp.cli.compare import _finite, add_common, emit
+from motor_comp.cli.common import check_output_file, jsonable
+from motor_comp.cli.compare import add_common, emit
 from motor_comp.cli.diagnose import add_diagnose_options
 from motor_comp.errors import MotorCompError
 
@@ -37,8 +37,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Execute ``fit``."""
     from motor_comp.workbench import fit, open_session, predict
-    if args.output and Path(args.output).is_dir():
-        raise MotorCompError(f'{args.output}: is a directory, expected a model file name')
+    if args.output:     # fail before the fit, not after it
+        check_output_file(args.output, '-o')
     s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold)
 
     def say(msg: str) -> None:
@@ -66,5 +66,5 @@ def run(args: argparse.Namespace) -> int:
                         'after': after.rms_error}
     if args.output:
         data['output'] = str(args.output)
-    emit(args, _finite(data), '\n'.join(lines))
+    emit(args, jsonable(data), '\n'.join(lines))
     return 0

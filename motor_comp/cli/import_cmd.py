@@ -7,29 +7,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 
+from motor_comp.cli.common import add_json, check_output_file, finite_float, nonzero_float
 from motor_comp.errors import InputFileError
-
-
-def _finite(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
-    if not math.isfinite(v) or v == 0:
-        raise argparse.ArgumentTypeError(f'must be finite and non-zero, got {text!r}')
-    return v
-
-
-def _number(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
-    if not math.isfinite(v):
-        raise argparse.ArgumentTypeError(f'must be finite, got {text!r}')
-    return v
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -45,22 +25,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--velocity', metavar='COL', help='measured velocity column')
     p.add_argument('--reference-velocity', metavar='COL', help='reference velocity column')
     p.add_argument('--effort', metavar='COL', help='actuator force column')
-    p.add_argument('--time-scale', type=_finite, default=1.0, metavar='X',
+    p.add_argument('--time-scale', type=nonzero_float, default=1.0, metavar='X',
                    help='seconds per time unit (e.g. 1e-3 for ms)')
-    p.add_argument('--time-offset', type=_number, default=0.0, metavar='S',
+    p.add_argument('--time-offset', type=finite_float, default=0.0, metavar='S',
                    help='added to the scaled time [s]')
-    p.add_argument('--position-scale', type=_finite, default=1.0, metavar='X',
+    p.add_argument('--position-scale', type=nonzero_float, default=1.0, metavar='X',
                    help='metres per position unit (e.g. counts->m); also for --reference')
-    p.add_argument('--velocity-scale', type=_finite, default=None, metavar='X',
+    p.add_argument('--velocity-scale', type=nonzero_float, default=None, metavar='X',
                    help='(m/s) per velocity unit (default: the position scale)')
-    p.add_argument('--input-scale', type=_finite, default=1.0, metavar='X',
+    p.add_argument('--input-scale', type=nonzero_float, default=1.0, metavar='X',
                    help='factor of the input column')
-    p.add_argument('--effort-scale', type=_finite, default=1.0, metavar='X',
+    p.add_argument('--effort-scale', type=nonzero_float, default=1.0, metavar='X',
                    help='newtons per effort unit')
     p.add_argument('--mat-orient', choices=('auto', 'rows', 'columns'), default='auto',
                    help='MAT 2-D variables: signals are rows or columns (default: shorter axis)')
     p.add_argument('-o', '--output', required=True, metavar='RUN.mcap', help='output MCAP')
-    p.add_argument('--json', action='store_true', help='print one JSON object on stdout')
+    add_json(p)
     p.set_defaults(func=run)
 
 
@@ -71,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from motor_comp.logs import write_run
     from motor_comp.logs.importers import import_table
 
-    out = Path(args.output)
+    out = check_output_file(args.output, '-o')
     if out.resolve() == Path(args.data).resolve():
         raise InputFileError(f'{out}: output would overwrite the input')
     r = import_table(args.data, time=args.time, input=args.input, position=args.position,

@@ -18,7 +18,9 @@ import time
 from pathlib import Path
 from typing import Any, Iterator
 
+from motor_comp.cli.common import add_json, nonnegative_float
 from motor_comp.errors import InputFileError, ParameterError
+from motor_comp.logs.progress import warn
 
 
 def _message_class(type_name: str) -> Any | None:
@@ -34,17 +36,45 @@ def _message_class(type_name: str) -> Any | None:
         return None
 
 
-def _messages(path: Path) -> Iterator[tuple[str, str, int, bytes]]:
-    """(topic, type, log_time_ns, cdr) in log-time order; one-line errors."""
+def _messages(path: Path, damage: list[tuple[int, str]] | None = None
+              ) -> Iterator[tuple[str, str, int, bytes]]:
+    """(topic, type, log_time_ns, cdr) in log-time order; one-line errors.
+
+    A file without a readable summary (truncated, or the recorder was killed) is read
+    linearly in file order up to its damage, which is described in ``damage``.
+    """
     from mcap.exceptions import McapError
-    from mcap.reader import make_reader
+    from mcap.reader import NonSeekingReader, make_reader
+
+    from motor_comp.logs.mcap_io import MAGIC
     try:
         with open(path, 'rb') as f:
+            if f.read(len(MAGIC)) != MAGIC:
+                raise InputFileError(f'{path}: not an MCAP file (bad magic bytes)')
+            f.seek(0)
             reader = make_reader(f)
-            for schema, channel, message in reader.iter_messages(log_time_order=True):
-                if channel.message_encoding != 'cdr' or schema is None:
-                    continue
-                yield channel.topic, schema.name, message.log_time, message.data
+            try:
+                reader.get_summary()
+                intact = True
+            except Exception:  # noqa: BLE001 - any failure here means: no usable summary
+                intact = False
+            if intact:
+                for schema, channel, message in reader.iter_messages(log_time_order=True):
+                    if channel.message_encoding == 'cdr' and schema is not None:
+                        yield channel.topic, schema.name, message.log_time, message.data
+                return
+            f.seek(0)
+            n = 0
+            try:
+                for schema, channel, message in NonSeekingReader(f).iter_messages(
+                        log_time_order=False):
+                    if channel.message_encoding == 'cdr' and schema is not None:
+                        n += 1
+                        yield channel.topic, schema.name, message.log_time, message.data
+            except Exception as exc:  # noqa: BLE001 - a parse failure is the damage
+                if damage is not None:
+                    why = f'{type(exc).__name__}: {exc}' if str(exc) else type(exc).__name__
+                    damage.append((n, why[:100]))
     except FileNotFoundError:
         raise InputFileError(f'{path}: no such file') from None
     except (McapError, ValueError, EOFError, OSError) as exc:
@@ -61,16 +91,30 @@ def replay(path: Path, *, rate: float = 1.0, wait_for_subscribers: int = 0,
     ``timeout`` s) and then ``startup_delay`` s, so DDS discovery completes.
     """
     path = Path(path)
+    if path.is_dir():
+        raise InputFileError(f'{path}: is a directory, expected an MCAP file')
     if not path.is_file():
         raise InputFileError(f'{path}: no such file')
+    if path.stat().st_size == 0:
+        raise InputFileError(f'{path}: empty file')
     if not (rate >= 0.0 and rate < float('inf')):
         raise ParameterError(f'--rate must be >= 0, got {rate:g}')
+    if not (startup_delay >= 0.0 and startup_delay < float('inf')):
+        raise ParameterError(f'--startup-delay must be a finite number >= 0, '
+                             f'got {startup_delay:g}')
     # pre-scan: the channels to publish (and a corrupt file fails before any publish)
     types: dict[str, str] = {}
-    for topic, type_name, _, _ in _messages(path):
+    damage: list[tuple[int, str]] = []
+    for topic, type_name, _, _ in _messages(path, damage):
         types.setdefault(topic, type_name)
+    if damage and not types:
+        raise InputFileError(f'{path}: corrupt or truncated ({damage[0][1]}); '
+                             'no messages could be read')
     if not types:
         raise InputFileError(f'{path}: no CDR messages to replay')
+    if damage:
+        warn(f'{path.name}: damaged or unfinished file; replaying the {damage[0][0]} '
+             f'messages recovered before the damage ({damage[0][1]})')
 
     import rclpy
     from rclpy.duration import Duration
@@ -131,13 +175,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser('replay', help='publish a recorded run with its timing',
                               description=__doc__.splitlines()[0])
     p.add_argument('run', type=Path, help='RUN.mcap')
-    p.add_argument('--rate', type=float, default=1.0,
+    p.add_argument('--rate', type=nonnegative_float, default=1.0,
                    help='speed factor (default 1 = recorded speed; 0 = as fast as possible)')
     p.add_argument('--wait-for-subscribers', type=int, default=0, metavar='N',
                    help='wait until N readers matched before publishing (default 0)')
-    p.add_argument('--startup-delay', type=float, default=1.0,
+    p.add_argument('--startup-delay', type=nonnegative_float, default=1.0,
                    help='seconds for DDS discovery before the first message (default 1)')
-    p.add_argument('--json', action='store_true', help='print the counts as one JSON object')
+    add_json(p, help='print the counts as one JSON object')
     p.set_defaults(func=run)
 
 

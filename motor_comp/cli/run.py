@@ -26,12 +26,16 @@ from typing import Any, Mapping, Sequence
 
 import yaml
 
-from motor_comp.errors import InputFileError, MotorCompError, ParameterError
+from motor_comp.cli.common import add_json, check_output_file, positive_float
+from motor_comp.errors import MotorCompError, ParameterError
 
 NODES = ('recorder_node', 'controller_node', 'trajectory_node', 'plant_node')
 MODES = ('pid', 'adaptive_sliding', 'npid')
 FEEDFORWARDS = ('none', 'static', 'gms', 'static+gms')
 _counter = itertools.count()
+#: SCHED_FIFO priority of the loop processes in realtime mode (ros2_control uses 50 for
+#: its control thread; below it, so a co-running ros2_control keeps precedence)
+DEFAULT_RT_PRIORITY = 40
 
 
 class NodeProcessError(MotorCompError):
@@ -182,6 +186,8 @@ class RunSpec:
     control_rate: float = 1000.0
     seed: int = 0
     namespace: str = 'axis'
+    #: realtime: SCHED_FIFO priority of the plant, trajectory and controller (0 = off)
+    realtime_priority: int = 0
     extra_params: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
 
     def node_params(self) -> dict[str, dict[str, Any]]:
@@ -190,7 +196,8 @@ class RunSpec:
         traj = self.trajectory or ('p2p' if self.plant == 'pmlm' else 'sine')
         # the plant starts at rest on the reference, as the in-process simulator does
         x0 = make_trajectory(traj).at(0.0).position
-        common = {'timing': self.timing, 'control_rate': float(self.control_rate)}
+        common = {'timing': self.timing, 'control_rate': float(self.control_rate),
+                  'realtime_priority': int(self.realtime_priority)}
         params = {
             'plant_node': {**common, 'plant': self.plant, 'duration': float(self.duration),
                            'seed': int(self.seed), 'x0': float(x0),
@@ -214,9 +221,8 @@ def run_nodes(spec: RunSpec, *, workdir: Path | None = None, timeout: float | No
     Raises :class:`NodeProcessError` (one line, with the failing node's last output)
     if a node exits early or the run does not finish within ``timeout`` seconds.
     """
-    out = Path(spec.output)
-    if not out.parent.is_dir():
-        raise InputFileError(f'{out}: output directory {out.parent} does not exist')
+    # the recorder would only fail after every node has started: check the path first
+    out = check_output_file(spec.output, '-o')
     if timeout is None:
         timeout = 60.0 + 20.0 * spec.duration
     with tempfile.TemporaryDirectory(prefix='motor_comp_run_') as tmp:
@@ -290,17 +296,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help='default: p2p on the PMLM, sine on the ball-screw')
     p.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep',
                    help='timing mode (default lockstep)')
-    p.add_argument('--duration', type=float, default=2.0, help='sim time [s] (default 2)')
-    p.add_argument('--rate', type=float, default=1000.0, help='control rate [Hz]')
+    p.add_argument('--duration', type=positive_float, default=2.0,
+                   help='sim time [s] (default 2)')
+    p.add_argument('--rate', type=positive_float, default=1000.0, help='control rate [Hz]')
     p.add_argument('--seed', type=int, default=0)
     p.add_argument('--namespace', default='axis',
                    help='namespace of the axis topics and nodes (default axis)')
-    p.add_argument('--timeout', type=float, default=None,
+    p.add_argument('--timeout', type=positive_float, default=None,
                    help='wall-time limit [s] (default 60 + 20·duration)')
     p.add_argument('--domain-id', type=int, default=None,
                    help='ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID or a private one)')
+    p.add_argument('--rt-priority', type=int, default=None, metavar='N',
+                   help='realtime mode: SCHED_FIFO priority 1..98 of the plant, trajectory '
+                        'and controller processes (default 40 where permitted, else normal '
+                        'scheduling with a warning; 0 = off)')
     p.add_argument('-o', '--output', required=True, type=Path, help='RUN.mcap to write')
-    p.add_argument('--json', action='store_true', help='print one JSON object')
+    add_json(p, help='print one JSON object')
     p.set_defaults(func=run)
 
 
@@ -310,12 +321,17 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f'--duration must be > 0, got {args.duration:g}')
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:
         raise ParameterError(f'--domain-id must be in 0..232, got {args.domain_id}')
+    prio = args.rt_priority
+    if prio is None:
+        prio = DEFAULT_RT_PRIORITY if args.mode == 'realtime' else 0
+    if not 0 <= prio <= 98:
+        raise ParameterError(f'--rt-priority must be in 0..98, got {prio}')
     from motor_comp.physics.config import load_plant
     load_plant(args.plant)   # a bad plant name/file is a one-line error before any process
     spec = RunSpec(output=args.output, plant=args.plant, controller=args.controller,
                    feedforward=args.feedforward, trajectory=args.trajectory,
                    timing=args.mode, duration=args.duration, control_rate=args.rate,
-                   seed=args.seed, namespace=args.namespace)
+                   seed=args.seed, namespace=args.namespace, realtime_priority=prio)
     path = run_nodes(spec, timeout=args.timeout, domain_id=args.domain_id)
     row = metrics_row(path, args.namespace)
     row.update(plant=args.plant, controller=args.controller, feedforward=args.feedforward,

@@ -10,25 +10,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from typing import Any
 
+from motor_comp.cli.common import add_json, check_output_file, jsonable, positive_float
+
 CONTROLLERS = ('pid', 'adaptive_sliding', 'npid')
 FEEDFORWARDS = ('none', 'static', 'gms', 'static+gms')
 TRAJECTORIES = ('sine', 'p2p', 'cv', 'chirp')
-
-
-def positive_float(text: str) -> float:
-    """Argparse type: a finite number > 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f'must be a finite number > 0, got {text!r}')
-    return v
 
 
 def add_scenario_arguments(p: argparse.ArgumentParser, *, plant_required: bool) -> None:
@@ -61,7 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help='quadrant-glitch window W [s] (default 0.2)')
     p.add_argument('-o', '--output', metavar='RUN.mcap', help='record the run to MCAP')
     p.add_argument('--name', default=None, help='run name (default: output stem)')
-    p.add_argument('--json', action='store_true', help='print one JSON object on stdout')
+    add_json(p)
     p.set_defaults(func=run)
 
 
@@ -72,17 +62,6 @@ def scenario_from_args(args: argparse.Namespace) -> Any:
     return Scenario(plant=args.plant, controller=args.controller,
                     feedforward=args.feedforward, duration=args.duration, seed=args.seed,
                     trajectory=args.trajectory, settings=settings)
-
-
-def jsonable(x: Any) -> Any:
-    """Replace non-finite floats by None, recursively (strict JSON)."""
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, dict):
-        return {k: jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [jsonable(v) for v in x]
-    return x
 
 
 def run_metadata(scenario: Any, ctrl: Any, result: Any) -> dict[str, str]:
@@ -109,6 +88,8 @@ def run(args: argparse.Namespace) -> int:
     from motor_comp.errors import InputFileError
 
     scenario = scenario_from_args(args)
+    if args.output:
+        check_output_file(args.output, '-o')  # fail now, not after the simulation
     t0 = time.perf_counter()
     result, ctrl = scenario.run(engine=args.engine)
     wall = time.perf_counter() - t0

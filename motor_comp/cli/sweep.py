@@ -13,11 +13,11 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import math
 import sys
 from typing import Any, Mapping
 
-from motor_comp.cli.simulate import add_scenario_arguments, jsonable
+from motor_comp.cli.common import add_json, check_output_file, jsonable, positive_float
+from motor_comp.cli.simulate import add_scenario_arguments
 from motor_comp.errors import InputFileError, ParameterError
 
 METRIC_KEYS = ('rms_error', 'max_error', 'max_glitch', 'mean_glitch')
@@ -32,10 +32,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help='a swept setting and its values (repeatable)')
     p.add_argument('--grid-file', metavar='GRID.yaml', help='base settings and grid in YAML')
     p.add_argument('--workers', type=int, default=None, help='processes (default: cores)')
-    p.add_argument('--glitch-window', type=float, default=0.2, metavar='S',
+    p.add_argument('--glitch-window', type=positive_float, default=0.2, metavar='S',
                    help='quadrant-glitch window W [s] (default 0.2)')
     p.add_argument('--csv', metavar='FILE', help='write the summary table as CSV')
-    p.add_argument('--json', action='store_true', help='print one JSON object on stdout')
+    add_json(p)
     p.set_defaults(func=run)
 
 
@@ -92,10 +92,10 @@ def run(args: argparse.Namespace) -> int:
     from motor_comp.control.scenario import parse_assignment
     from motor_comp.control.sweep import expand_grid, run_sweep, table
 
-    if not (args.glitch_window > 0 and math.isfinite(args.glitch_window)):
-        raise ParameterError('--glitch-window must be a finite number > 0')
     if args.workers is not None and args.workers < 1:
         raise ParameterError('--workers must be >= 1')
+    if args.csv:        # fail before the sweep, not after it
+        check_output_file(args.csv, '--csv')
     base: dict[str, Any] = {'plant': args.plant, 'controller': args.controller,
                             'feedforward': args.feedforward, 'duration': args.duration,
                             'seed': args.seed}

@@ -9,7 +9,9 @@ Per step, at control period ``T`` (``e = r − y`` [m]):
 
 1. ``ė_f`` ← filtered ``ṙ − v_meas``; ``I ← I + T·e``;
 2. feedback by mode — PID ``Kp·e + Ki·I + Kd·ė_f``; N-PID ``k(e)·(…)`` (Chiew eq. 8);
-   adaptive sliding ``K·s + θ̂ᵀY + k̂·sat(s/φ)`` with its update laws (Tan eq. 15–24);
+   adaptive sliding ``K·s + θ̂ᵀY + k̂·sat(s/φ_k)`` with its update laws (Tan eq. 15–24,
+   with the robust modifications of :mod:`.adaptive_sliding`: balance condition, dead
+   zones, frozen at rest, σ-leakage; their settings are packed at ``Q_EPS_TH…Q_TH0``);
 3. friction feedforward from the reference (Chiew Fig. 9), force / nominal input gain;
 4. saturation ±u_max; conditional-integration anti-windup.
 """
@@ -24,7 +26,7 @@ from numba import njit
 
 from motor_comp.control._jitcache import JIT_INLINE
 from motor_comp.control.adaptive_sliding import ESTIMATES, N_THETA, AdaptiveParams, \
-    adaptive_output, estimates_in_units, nominal_theta, projection_box
+    Robustness, adaptive_output, estimates_in_units, nominal_theta, projection_box, robustness
 from motor_comp.control.feedforward import Feedforward, friction_feedforward
 from motor_comp.control.npid import NPIDParams, npid_gain, popov_limit, sampled_loop
 from motor_comp.control.params import ParamsBase
@@ -74,7 +76,11 @@ Q_FC, Q_FS, Q_VS, Q_DELTA, Q_FV = Q_GAIN + 1, Q_GAIN + 2, Q_GAIN + 3, Q_GAIN + 4
 Q_GMS_N, Q_GMS_C = Q_GAIN + 6, Q_GAIN + 7
 Q_GMS_ALPHA = Q_GAIN + 8
 Q_GMS_K = Q_GMS_ALPHA + MAX_ELEMENTS
-Q_SIZE = Q_GMS_K + MAX_ELEMENTS
+# robustness of the adaptive laws (dead zone, layer slope, rest speed, leakage, targets)
+Q_EPS_TH = Q_GMS_K + MAX_ELEMENTS
+Q_EPS_K, Q_KLAYER, Q_VREST, Q_SIGMA = Q_EPS_TH + 1, Q_EPS_TH + 2, Q_EPS_TH + 3, Q_EPS_TH + 4
+Q_TH0 = Q_EPS_TH + 5
+Q_SIZE = Q_TH0 + N_THETA
 
 # ---- state C --------------------------------------------------------------------------
 C_I, C_ED, C_E, C_U, C_UFF, C_INIT, C_RPREV, C_S = 0, 1, 2, 3, 4, 5, 6, 7
@@ -96,9 +102,10 @@ def feedback(Q, C, e, ed, integ, ra, rv, y, dt, adapt):
     """
     mode = int(Q[Q_MODE])
     if mode == 1:
-        return adaptive_output(C, C_TH, Q, Q_GAMMA, Q_LO, Q_HI, Q[Q_KS], Q[Q_LAM1],
-                               Q[Q_LAM2], Q[Q_PHI], Q[Q_OMEGA], Q[Q_TF], e, ed, integ, ra,
-                               rv, y, dt, adapt)
+        return adaptive_output(C, C_TH, Q, Q_GAMMA, Q_LO, Q_HI, Q_TH0, Q[Q_KS], Q[Q_LAM1],
+                               Q[Q_LAM2], Q[Q_PHI], Q[Q_OMEGA], Q[Q_TF], Q[Q_EPS_TH],
+                               Q[Q_EPS_K], Q[Q_KLAYER], Q[Q_VREST], Q[Q_SIGMA], e, ed, integ,
+                               ra, rv, y, dt, adapt)
     if mode == 2:
         k = npid_gain(e, Q[Q_K0], Q[Q_EMAX], Q[Q_KMAX])
         return k * pid_output(Q[Q_KP], Q[Q_KI], Q[Q_KD], e, integ, ed), 0.0
@@ -201,6 +208,11 @@ class Controller:
                                             p.gamma_k)
             lo, hi = projection_box(theta, p.bound_factor)
             Q[Q_LO:Q_LO + N_THETA], Q[Q_HI:Q_HI + N_THETA] = lo, hi
+            rob = self.robustness
+            Q[Q_EPS_TH], Q[Q_EPS_K] = rob.deadzone_theta, rob.deadzone_k
+            Q[Q_KLAYER] = rob.layer_slope
+            Q[Q_VREST], Q[Q_SIGMA] = rob.rest_speed, rob.sigma
+            Q[Q_TH0:Q_TH0 + N_THETA] = theta
         else:
             Q[Q_KP], Q[Q_KI], Q[Q_KD] = p.kp, p.ki, p.kd
         if mode is ControlMode.NPID:
@@ -215,6 +227,14 @@ class Controller:
             Q[Q_GMS_ALPHA:Q_GMS_ALPHA + n] = self._gms.alpha
             Q[Q_GMS_K:Q_GMS_K + n] = self._gms.k
         self.packed[:] = Q
+
+    @property
+    def robustness(self) -> Robustness:
+        """Dead zone, layer slope, rest speed and leakage of the adaptive laws (SI)."""
+        p = self._params.get(ControlMode.ADAPTIVE_SLIDING) or AdaptiveParams()
+        sens = self.plant.sensors
+        return robustness(p, encoder_resolution=sens.encoder_resolution,
+                          noise_std=sens.noise_std, control_period=1.0 / self.plant.control_rate)
 
     def popov_limit(self) -> float:
         """Popov bound of k(e) for the sampled loop of the nominal plant (Chiew eq. 9)."""

@@ -33,6 +33,9 @@ from motor_comp.errors import InputFileError, ParameterError, check_finite
 from motor_comp.logs.progress import warn
 from motor_comp.logs.run import Run
 
+#: file name extensions read as delimited text (anything else but .mat is refused: a
+#: spreadsheet or JSON file parsed as CSV gives a misleading "no data rows" error)
+TEXT_SUFFIXES = ('.csv', '.tsv', '.txt', '.dat')
 #: Run fields that can be imported, in order; ``time`` and ``position`` are required
 FIELDS = ('time', 'input', 'position', 'reference', 'velocity', 'reference_velocity',
           'effort')
@@ -205,7 +208,7 @@ def import_table(path: str | Path, *, time: str, input: str, position: str,
     Parameters
     ----------
     path : str or Path
-        ``.csv`` / ``.txt`` / ``.tsv`` or ``.mat`` file.
+        ``.csv`` / ``.tsv`` / ``.txt`` / ``.dat`` or ``.mat`` file.
     time, input, position : str
         Column specs (see the module docstring) of time, the input (voltage, current or
         force — whatever the model's ``input_gain`` converts) and measured position.
@@ -245,8 +248,12 @@ def import_table(path: str | Path, *, time: str, input: str, position: str,
     offset = check_finite('time_offset', time_offset)
     if any(s == 0 for s in scales.values()):
         raise ParameterError('scales must be non-zero')
-    table: _Csv | _Mat = (_Mat(path, mat_orient) if path.suffix.lower() == '.mat'
-                          else _Csv(path))
+    suffix = path.suffix.lower()
+    if suffix not in TEXT_SUFFIXES + ('.mat',):
+        raise InputFileError(f'{path}: unsupported file type {suffix or "(no extension)"!r}; '
+                             f'import reads delimited text ({", ".join(TEXT_SUFFIXES)}) '
+                             'or MATLAB .mat (export other formats to CSV)')
+    table: _Csv | _Mat = _Mat(path, mat_orient) if suffix == '.mat' else _Csv(path)
     specs = {'time': time, 'input': input, 'position': position, 'reference': reference,
              'velocity': velocity, 'reference_velocity': reference_velocity,
              'effort': effort}

@@ -22,9 +22,13 @@ needs no ROS install.  Policies (documented contract of the reader):
   without any finite sample is treated as absent.
 * **Damage.**  Missing, empty, non-MCAP files raise :class:`InputFileError`.  A file
   that is truncated, unfinalised (no footer, e.g. recorder killed) or corrupt part-way
-  is read record by record up to the damage; what was complete is returned, with a
+  is read record by record up to the damage; what was complete is returned, ending at
+  the last stamp every topic reached (nothing is held over the lost part), with a
   warning stating where reading stopped and how many messages/what time span were
   recovered.  If nothing usable precedes the damage, :class:`InputFileError`.
+* **Required signals.**  ``read_run(require=...)`` turns a missing or all-NaN signal
+  the caller needs into one :class:`InputFileError` naming file, topic and reason; an
+  optional signal without any finite sample is a warning and treated as absent.
 
 Speed and memory: the file is read record by record (one chunk in memory at a time);
 a chunk's message indexes give the offsets of its messages, whose payloads are decoded
@@ -742,13 +746,22 @@ class _Reader:
             return np.nan, cdr.SHORT
 
 
-def _clean(path: Path, topic: str, field: str, t: np.ndarray, v: np.ndarray
+def _clean(path: Path, topic: str, field: str, t: np.ndarray, v: np.ndarray,
+           unusable: dict[str, str] | None = None, signal: str = ''
            ) -> tuple[np.ndarray, np.ndarray] | None:
-    """Sort, de-duplicate and drop non-finite samples of one signal (warning on stderr)."""
+    """Sort, de-duplicate and drop non-finite samples of one signal (warning on stderr).
+
+    A signal without any finite sample is returned as None and, instead of a warning,
+    its reason goes into ``unusable[signal]``: the caller decides whether that is an
+    error (a required signal) or a warning (an optional one).
+    """
     if t.size == 0:
         return None
     finite = np.isfinite(v)
     bad = int(t.size - np.count_nonzero(finite))
+    if bad == t.size and unusable is not None:
+        unusable[signal] = f'all {bad} {topic} {field} samples are NaN/Inf'
+        return None
     if bad:
         warn(f'{path.name}: {topic} {field}: dropped {bad} non-finite (NaN/Inf) samples')
         t, v = t[finite], v[finite]
@@ -769,7 +782,8 @@ def _clean(path: Path, topic: str, field: str, t: np.ndarray, v: np.ndarray
 
 
 def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str = 'axis',
-             joint: str = 'axis', signals: Collection[str] | None = None) -> Run:
+             joint: str = 'axis', signals: Collection[str] | None = None,
+             require: Collection[str] | Mapping[str, str] = ()) -> Run:
     """Read an MCAP run into time-aligned arrays (see the module docstring for policies).
 
     Parameters
@@ -786,6 +800,11 @@ def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str 
     signals : collection of str, optional
         The :attr:`Run.SIGNALS` to return (``position`` always); the others are not
         kept, which saves memory on long runs.  Default: all.
+    require : collection of str, or mapping of str to str
+        Signals the caller cannot do without (e.g. ``voltage`` for the workbench):
+        when one is absent or has no finite sample, one :class:`InputFileError` names
+        the file, the topic and why, instead of a warning.  A mapping's values are
+        appended to the message as a hint.
 
     Returns
     -------
@@ -796,7 +815,8 @@ def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str 
     Raises
     ------
     InputFileError
-        Missing, empty, non-MCAP or unreadable file, or no joint-state samples.
+        Missing, empty, non-MCAP or unreadable file, no joint-state samples, or a
+        required signal is absent.
     """
     path = Path(path)
     if not path.exists():
@@ -816,6 +836,7 @@ def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str 
         raise InputFileError(f'{path}: not an MCAP file (only {size} bytes)')
     names = schemas.topics(namespace)
     keep = set(Run.SIGNALS) if signals is None else set(signals) | {'position'}
+    keep |= set(require)
     unknown = keep - set(Run.SIGNALS)
     if unknown:
         raise ParameterError(f'signals: unknown {sorted(unknown)}; choose from {Run.SIGNALS}')
@@ -846,13 +867,38 @@ def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str 
         found = ', '.join(sorted(reader.all_topics)) or 'none'
         raise InputFileError(f'{path}: no {names["joint_states"]} messages '
                              f'(topics in file: {found})')
-    run = _assemble(path, reader, names)
+    unusable: dict[str, str] = {}
+    run = _assemble(path, reader, names, unusable, damaged=damage is not None)
+    for field in require:
+        if getattr(run, field) is None:
+            raise InputFileError(_absent(path, reader, names, field, unusable, damage,
+                                         hint=require.get(field, '')
+                                         if isinstance(require, Mapping) else ''))
+    for field, why in unusable.items():
+        warn(f'{path.name}: {why}; {field} treated as absent')
     if damage is not None:
         span = f'{run.t[0]:.6g}–{run.t[-1]:.6g} s' if len(run) else 'no samples'
         warn(f'{path.name}: {"unfinished" if "footer" in damage.reason else "damaged"} '
              f'file, reading stopped at byte {damage.offset} of {size} ({damage.reason}); '
              f'recovered {reader.messages} messages, {len(run)} samples, {span}')
     return run
+
+
+def _absent(path: Path, reader: _Reader, names: Mapping[str, str], field: str,
+            unusable: Mapping[str, str], damage: _Damage | None, hint: str) -> str:
+    """Return the one-line message for a required signal the file does not provide."""
+    topic = names[{'reference': 'reference', 'reference_velocity': 'reference',
+                   'voltage': 'voltage'}.get(field, 'joint_states')]
+    if field in unusable:
+        why = unusable[field]
+    elif topic not in reader.all_topics:
+        found = ', '.join(sorted(reader.all_topics)) or 'none'
+        why = f'no {topic} messages (topics in file: {found})'
+    else:
+        why = f'the {topic} messages carry no {field}'
+    if damage is not None:
+        why += f'; the file is damaged at byte {damage.offset}, only what precedes was read'
+    return f'{path}: missing {field}: {why}' + (f'; {hint}' if hint else '')
 
 
 def _masked(stamp: np.ndarray, values: np.ndarray, present: np.ndarray, bit: int
@@ -863,7 +909,8 @@ def _masked(stamp: np.ndarray, values: np.ndarray, present: np.ndarray, bit: int
     return stamp[m], values[m]
 
 
-def _assemble(path: Path, reader: _Reader, names: Mapping[str, str]) -> Run:
+def _assemble(path: Path, reader: _Reader, names: Mapping[str, str],
+              unusable: dict[str, str], damaged: bool = False) -> Run:
     # Memory: each decoded array is concatenated once and released as soon as it has
     # been aligned, so the peak stays near the size of the decoded data.
     js = reader.topics[names['joint_states']]
@@ -874,10 +921,12 @@ def _assemble(path: Path, reader: _Reader, names: Mapping[str, str]) -> Run:
                        ('effort', cdr.HAS_EFFORT)):
         if field not in js.drop:
             series[field] = _clean(path, js.topic, field,
-                                   *_masked(stamp, js.get(field), present, bit))
+                                   *_masked(stamp, js.get(field), present, bit),
+                                   unusable, field)
     del stamp, present
     if series['position'] is None:
-        raise InputFileError(f'{path}: {js.topic} carries no finite position samples')
+        why = unusable.get('position', f'{js.topic} carries no position samples')
+        raise InputFileError(f'{path}: missing position: {why}')
     ref = reader.topics.get(names['reference'])
     if ref is not None and ref.count():
         rp = ref.get('present').astype(np.uint8)
@@ -886,7 +935,7 @@ def _assemble(path: Path, reader: _Reader, names: Mapping[str, str]) -> Run:
                                 ('reference_velocity', 'velocity', cdr.HAS_VELOCITY)):
             if key not in ref.drop:
                 series[field] = _clean(path, ref.topic, key,
-                                       *_masked(rs, ref.get(key), rp, bit))
+                                       *_masked(rs, ref.get(key), rp, bit), unusable, field)
         del rp, rs
     volt = reader.topics.get(names['voltage'])
     if volt is not None and volt.count():
@@ -894,7 +943,8 @@ def _assemble(path: Path, reader: _Reader, names: Mapping[str, str]) -> Run:
         offset = -int(np.median(np.concatenate(js.log_minus_stamp)))
         if abs(offset) > 1_000_000_000:   # stamps and log times are different clocks
             vt = vt + offset
-        series['voltage'] = _clean(path, volt.topic, 'value', vt, volt.get('value'))
+        series['voltage'] = _clean(path, volt.topic, 'value', vt, volt.get('value'),
+                                   unusable, 'voltage')
 
     t_ns, position = series.pop('position')   # type: ignore[misc]
     present_series = {f: s for f, s in series.items() if s is not None}
@@ -905,7 +955,14 @@ def _assemble(path: Path, reader: _Reader, names: Mapping[str, str]) -> Run:
         late = max(present_series, key=lambda f: present_series[f][0][0])
         raise InputFileError(f'{path}: {late} starts after the last measurement '
                              '(topics do not overlap in time)')
-    t_ns = t_ns[first:]
+    stop = t_ns.size
+    if damaged and present_series:
+        # A damaged file loses whole chunks, so a topic whose last messages were in the
+        # lost part would be held over at the end of the run: stop at the last stamp
+        # that every topic reached, so no returned sample is made up.
+        end = min(int(s[0][-1]) for s in present_series.values())
+        stop = max(int(np.searchsorted(t_ns, end, side='right')), first + 1)
+    t_ns = t_ns[first:stop]
     aligned: dict[str, np.ndarray] = {}
     for field in list(present_series):
         ts, vs = present_series.pop(field)
@@ -920,5 +977,5 @@ def _assemble(path: Path, reader: _Reader, names: Mapping[str, str]) -> Run:
     for name, rec in reader.metadata.items():
         for k, v in rec.items():
             meta[k if name == METADATA_NAME else f'{name}/{k}'] = v
-    return Run(t=t_ns / 1e9, position=position[first:], metadata=meta, name=path.stem,
+    return Run(t=t_ns / 1e9, position=position[first:stop], metadata=meta, name=path.stem,
                **aligned)

@@ -18,9 +18,17 @@ readers of ``joint_states`` (controller + recorder by default) are matched, so n
 start in any order.  With ``duration`` > 0 the node exits after that much sim time.
 
 Realtime: after the same wait for peers, a wall-clock timer at ``control_rate``
-measures and publishes (stamped with the wall clock); a command takes effect when it
-arrives (zero-order hold from its arrival, at the physics-step resolution), so the
-loop's delay is its real transport and computation time.
+measures and publishes, stamped ``t0 + k·T`` — the sim time of the sample on the wall
+clock's axis (stamping the timer's late firing time instead would add the timer latency,
+0.1–2 ms on a loaded machine, as jitter between the sample and its stamp); a command
+takes effect when it arrives (zero-order hold from its arrival, at the physics-step
+resolution), so the loop's delay is its real transport and computation time.  If the
+*plant process* is descheduled for whole periods, the simulated world pauses with it
+(sim time slips behind the wall clock, counted and logged) rather than running the
+axis open-loop through the gap: a hiccup of the simulator is not a physical event, and
+catching up (as before) turned a 19 ms stall into a 1.8 mm excursion of the
+ball-screw.  A late *controller* is still physical: the plant runs on, holding the last
+command, exactly as a drive does.
 
 A non-finite command never reaches the physics: it is refused with a warning and the
 step is taken at 0 V, so the loop goes on.
@@ -37,9 +45,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from motor_comp.errors import ParameterError
-from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, Param, ParamNode, \
-    SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, TOPIC_VOLTAGE, Timing, period_ns, run_node, \
-    set_stamp
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, \
+    REALTIME_PRIORITY, Param, ParamNode, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, \
+    TOPIC_VOLTAGE, Timing, period_ns, run_node, set_realtime_priority, set_stamp
 from motor_comp.physics.config import load_plant
 from motor_comp.physics.plant import Plant, StepLoad
 
@@ -67,6 +75,7 @@ PARAMS = (
           '', 0, 100, read_only=True),
     Param('start_delay', 0.3, 'Lockstep: settle time after all peers matched', 's', 0.0,
           60.0, read_only=True),
+    REALTIME_PRIORITY,
 )
 
 
@@ -97,6 +106,7 @@ class PlantNode(ParamNode):
         self.published = 0
         self.late = 0
         self._t0_ns: int | None = None
+        self._slip_ns = 0                   # realtime: sim time behind the wall clock
         self._tick_ns: int | None = None   # realtime: wall time of the last measurement
         self._sub_done = 0                  # realtime: physics steps done in this period
         self.n_sub = self.plant.substeps(self.dt)
@@ -118,6 +128,8 @@ class PlantNode(ParamNode):
         self.get_logger().info(
             f'{cfg.kind.value} plant from {cfg.source}, {self.timing.value}, '
             f'{p["control_rate"]:g} Hz control, {physics:g} Hz physics')
+        if self.timing is Timing.REALTIME:
+            set_realtime_priority(self, p['realtime_priority'])
 
     # -- lockstep --------------------------------------------------------------------
     def _peers_ready(self) -> bool:
@@ -195,14 +207,14 @@ class PlantNode(ParamNode):
 
     # -- realtime --------------------------------------------------------------------
     def _on_tick(self) -> None:
-        """Close the running period, catch up with the wall clock, measure and publish.
+        """Close the running period, measure and publish the next sample.
 
         Within a period the command in force is the latest received: a command that
         arrives d after the tick's measurement takes effect d into the period (at the
         physics-step resolution), so the loop's delay is the real transport and
-        computation time, not a whole period.  Sim time stays locked to wall time: if
-        the machine delayed a tick by whole periods, the axis is advanced through them
-        with the held command (no sample is published for them).
+        computation time, not a whole period.  A tick this process delayed by whole
+        periods does not advance the axis through them: sim time slips (see the module
+        docstring), so the samples stay consecutive and every period is a closed-loop one.
         """
         if self._finished:
             return
@@ -212,18 +224,16 @@ class PlantNode(ParamNode):
         else:
             self._advance_substeps(self.n_sub - self._sub_done)
             self.k += 1
-        due = (now - self._t0_ns) // self.dt_ns
-        while self.k < min(due, self.n_steps if self.n_steps > 0 else due):
-            self.plant.measure(self.dt)   # keep the encoder's velocity per period
-            self._advance_substeps(self.n_sub)
-            self.k += 1
-            self.late += 1
+        behind = (now - self._t0_ns - self._slip_ns) // self.dt_ns - self.k
+        if behind > 0:
+            self._slip_ns += behind * self.dt_ns
+            self.late += behind
         if 0 < self.n_steps <= self.k:
             self._finished = True
-            self.get_logger().info(f'run complete: {self.k} steps in realtime, '
-                                   f'{self.late} periods caught up without a sample')
+            self.get_logger().info(f'run complete: {self.k} steps in realtime, sim time '
+                                   f'slipped {self.late} periods behind the wall clock')
             return
-        self._publish_measurement(now)
+        self._publish_measurement(self._t0_ns + self.k * self.dt_ns)
         self._tick_ns = now
         self._sub_done = 0
 

@@ -19,7 +19,14 @@ record per node (``params:<node>``, values as strings) immediately — so the re
 survives even a SIGKILL of the recorder.  Runtime changes arrive on
 ``/parameter_events`` and are written at the end as ``parameter_changes``
 (``<sim ns>:<node>.<param>`` → new value).  A ``run`` record states timing, counts and
-the topics.
+the topics.  Once the plant, controller and trajectory nodes have answered, the
+``motor_comp`` record (the one :func:`motor_comp.logs.read_run` returns as
+``Run.metadata``) gets the keys ``motor-comp simulate -o`` writes — ``plant``,
+``controller``, ``feedforward``, ``seed``, ``trajectory`` (JSON of
+``Trajectory.params()``), ``control_rate_hz``, ``physics_rate_hz``, ``gains`` — plus
+the finite gains as top-level keys, so ``motor-comp compare RUN --model M.yaml`` can
+replay the closed loop of a ROS recording (:func:`scenario_metadata`).  They describe
+the run as it started; runtime changes are in ``parameter_changes``.
 
 Shutdown: on SIGINT/SIGTERM the node keeps taking messages until the graph has been
 quiet for ``drain_time``, then closes the file (summary and index written), so no
@@ -29,10 +36,12 @@ complete chunk (``chunk_size`` bounds the loss).
 from __future__ import annotations
 
 import collections
+import json
+import math
 import struct
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 from rcl_interfaces.msg import ParameterEvent
 from rclpy.parameter import parameter_value_to_python
@@ -41,8 +50,9 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from motor_comp.errors import InputFileError
+from motor_comp.errors import InputFileError, MotorCompError
 from motor_comp.logs import McapRecorder
+from motor_comp.logs.mcap_io import METADATA_NAME
 from motor_comp.nodes.common import DEFAULT_NAMESPACE, EVENTS_QOS, Param, ParamNode, \
     RECORD_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, Timing, \
     run_node
@@ -65,6 +75,58 @@ PARAMS = (
 )
 
 _STAMP = struct.Struct('<iI')   # header.stamp (sec, nanosec) right after the CDR header
+
+
+def scenario_metadata(plant: Mapping[str, Any], controller: Mapping[str, Any],
+                      trajectory: Mapping[str, Any], *, timing: str) -> dict[str, str]:
+    """Describe the run like ``motor-comp simulate -o`` does, from the nodes' parameters.
+
+    Parameters
+    ----------
+    plant, controller, trajectory : Mapping
+        Parameter name → value of ``plant_node``, ``controller_node``,
+        ``trajectory_node`` (as their parameter services return them).
+    timing : str
+        ``lockstep`` or ``realtime`` (a lockstep run is the simulator's run exactly).
+
+    Returns
+    -------
+    dict of str to str
+        The ``motor_comp`` metadata record.
+    """
+    from motor_comp.control.trajectories import make_trajectory
+    from motor_comp.physics.config import load_plant
+
+    mode = str(controller['mode'])
+    kind = str(trajectory['trajectory'])
+    traj = make_trajectory(kind, **{k.split('.', 1)[1]: _plain(v)
+                                    for k, v in trajectory.items()
+                                    if k.startswith(kind + '.')})
+    gains = {k.split('.', 1)[1]: float(v) for k, v in controller.items()
+             if k.startswith(mode + '.')}
+    cfg = load_plant(str(plant['plant']))
+    meta = {'plant': str(plant['plant']), 'controller': mode,
+            'feedforward': str(controller['feedforward']), 'seed': str(int(plant['seed'])),
+            'trajectory': json.dumps(traj.params()),
+            'gains': json.dumps({k: v if math.isfinite(v) else None
+                                 for k, v in gains.items()}),
+            'control_rate_hz': repr(float(plant['control_rate'])),
+            'physics_rate_hz': repr(float(plant['physics_rate']) or cfg.physics_rate),
+            'load_force_N': repr(float(plant['load_force'])),
+            'load_start_s': repr(float(plant['load_start'])),
+            'x0_m': repr(float(plant['x0'])),
+            'settings': '{}', 'timing': timing,
+            'generator': 'motor-comp run (ROS 2 nodes)'}
+    # top level too (what compare's replay reads); inf (no limit) is the default anyway
+    meta.update({k: repr(v) for k, v in gains.items() if math.isfinite(v)})
+    return meta
+
+
+def _plain(value: Any) -> Any:
+    """ROS array parameters arrive as lists/arrays: make them tuples of float."""
+    if isinstance(value, (list, tuple)) or hasattr(value, 'tolist'):
+        return tuple(float(v) for v in value)
+    return value
 
 
 def cdr_stamp_ns(data: bytes) -> int:
@@ -128,6 +190,8 @@ class RecorderNode(ParamNode):
         names = [n.strip() for n in self.p['nodes'].split(',') if n.strip()]
         self._param_clients = {n: AsyncParameterClient(self, f'{ns}/{n}') for n in names}
         self._queried: set[str] = set()
+        self._raw_params: dict[str, dict[str, Any]] = {}
+        self._scenario_done = False
         self._param_timer = self.create_timer(0.2, self._query_parameters)
         self.get_logger().info(f'recording {", ".join(self.topics.values())} → {out}')
 
@@ -193,9 +257,27 @@ class RecorderNode(ParamNode):
         if self._closed:
             return
         values = future.result().values
-        data = {n: str(parameter_value_to_python(v)) for n, v in zip(names, values)}
+        raw = {n: parameter_value_to_python(v) for n, v in zip(names, values)}
+        data = {n: str(v) for n, v in raw.items()}
         self.writer.add_metadata(f'params:{name}', data)
         self.get_logger().info(f'stored {len(data)} parameters of {name}')
+        self._raw_params[name] = raw
+        self._write_scenario()
+
+    def _write_scenario(self) -> None:
+        """Write the ``motor_comp`` record once plant, controller and trajectory answered."""
+        need = ('plant_node', 'controller_node', 'trajectory_node')
+        if self._scenario_done or not all(n in self._raw_params for n in need):
+            return
+        self._scenario_done = True
+        try:
+            meta = scenario_metadata(*(self._raw_params[n] for n in need),
+                                     timing=self.timing.value)
+        except (KeyError, ValueError, TypeError, MotorCompError) as exc:
+            # e.g. nodes of another version: the record is optional, the run is not
+            self.get_logger().warning(f'run description not stored: {exc}')
+            return
+        self.writer.add_metadata(METADATA_NAME, meta)
 
     def _on_event(self, msg: ParameterEvent) -> None:
         node = msg.node.rsplit('/', 1)[-1]

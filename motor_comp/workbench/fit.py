@@ -121,12 +121,7 @@ def add_effects(kin: Kinematics, model: AxisModel, names: Sequence[str],
                 train: np.ndarray | None = None) -> AxisModel:
     """``model`` with the named effects added (nonlinear parameters searched), all refit."""
     for name in names:
-        if name != MASS and model.has(name):
-            raise ParameterError(f'the model already has {name!r}; it is refit anyway')
-        if name not in available_candidates(model):
-            raise ParameterError(
-                f'cannot add {name!r} to this model'
-                + (' (add coulomb first)' if name in ('stribeck', 'presliding') else ''))
+        _check_addable(model, name)
         res = residual(kin, model)
         rows = res.mask if train is None else train & res.mask
         model = FITTERS[name](FitContext(kin=kin, model=model, res=res), rows).model
@@ -176,6 +171,37 @@ class FitResult:
         return {'steps': [s.as_dict() for s in self.steps], 'model': self.model.to_dict()}
 
 
+def _check_addable(model: AxisModel, name: str) -> None:
+    """Raise :class:`ParameterError` if effect ``name`` cannot be added to ``model``."""
+    if name != MASS and model.has(name):
+        raise ParameterError(f'the model already has {name!r}; it is refit anyway')
+    if name not in available_candidates(model):
+        raise ParameterError(
+            f'cannot add {name!r} to this model'
+            + (' (add coulomb first)' if name in ('stribeck', 'presliding') else ''))
+
+
+def _check_add_list(model: AxisModel, names: Sequence[str]) -> None:
+    """Check a whole ``add`` list before any fitting, effect by effect in order.
+
+    The rules of :func:`available_candidates` (no duplicates, coulomb before stribeck
+    and presliding) applied to the names alone, so that a bad list fails at once
+    instead of after its first, possibly long, fitting steps.
+    """
+    present = {e.name for e in model.effects}
+    for name in names:
+        if name == MASS:
+            continue
+        if name in present:
+            raise ParameterError(f'the model already has {name!r}; it is refit anyway'
+                                 if model.has(name) else f'{name!r} is added twice')
+        if name in ('stribeck', 'presliding') and 'coulomb' not in present:
+            raise ParameterError(f'cannot add {name!r} to this model (add coulomb first)')
+        if name in ('coulomb', 'stribeck') and 'presliding' in present:
+            raise ParameterError(f'cannot add {name!r} to this model')
+        present.add(name)
+
+
 def fit(kin: Kinematics, model: AxisModel, *, add: Sequence[str] = (), auto: bool = False,
         folds: int = 5, min_gain: float = 0.1, max_steps: int = 6,
         progress: Callable[[str], None] | None = None, rotary: bool = False) -> FitResult:
@@ -185,6 +211,7 @@ def fit(kin: Kinematics, model: AxisModel, *, add: Sequence[str] = (), auto: boo
     model (``effect=None``, its NRMSE over all sliding samples since nothing is fitted).
     """
     say = progress or (lambda s: None)
+    _check_add_list(model, add)
     mask = residual(kin, model).mask
     steps = [FitStep(None, residual(kin, model, mask=mask).nrmse(), model, 'starting model')]
     say(f'start: force NRMSE {100 * steps[0].force_nrmse:.1f} %')

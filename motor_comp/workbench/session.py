@@ -24,6 +24,11 @@ class Session:
     model: AxisModel
 
 
+#: why the workbench cannot work without the logged drive input
+_NEEDS_INPUT = ('the workbench needs the command (or current/force) the model converts '
+                'with input_gain')
+
+
 def default_hold(model: AxisModel) -> InputHold:
     """Choose the input hold: a voltage command is held, a logged current/force sampled."""
     return InputHold.ZOH if model.input is InputKind.VOLTAGE else InputHold.SAMPLE
@@ -36,7 +41,7 @@ def load_run(path: str | Path) -> Run:
         raise InputFileError(f'{path}: tables are converted first: motor-comp import '
                              f'{path.name} --time COL --input COL --position COL -o RUN.mcap')
     from motor_comp.logs import read_run   # heavy (MCAP stack): load only when needed
-    return read_run(path)
+    return read_run(path, require={'voltage': _NEEDS_INPUT})
 
 
 def open_session(run_path: str | Path, model_path: str | Path, *,
@@ -44,10 +49,9 @@ def open_session(run_path: str | Path, model_path: str | Path, *,
     """Load model and run, check the run has the drive input, compute kinematics."""
     model = AxisModel.load(model_path)
     run = load_run(run_path)
-    if run.voltage is None:
-        raise InputFileError(f'{run_path}: no drive input (/axis/voltage) in this run; the '
-                             f'workbench needs the command (or current/force) the model '
-                             f'converts with input_gain')
+    if run.voltage is None:    # a Run that did not come from read_run(require=...)
+        raise InputFileError(f'{run_path}: no drive input (/axis/voltage) in this run; '
+                             f'{_NEEDS_INPUT}')
     kin = kinematics(run, window_s=window_s,
                      hold=InputHold(hold) if hold else default_hold(model))
     return Session(run=run, kin=kin, model=model)

@@ -13,7 +13,7 @@ _COUNTER = [0]
 
 
 def private_domain() -> int:
-    """A ROS_DOMAIN_ID in 1..101 unique to this test process and call."""
+    """Return a ROS_DOMAIN_ID in 1..101 unique to this test process and call."""
     _COUNTER[0] += 1
     return 1 + (os.getpid() * 13 + _COUNTER[0] * 37) % 101
 
@@ -35,7 +35,7 @@ def ros_env() -> dict[str, str]:
 
 @pytest.fixture
 def nodes(tmp_path: Path, ros_env: dict[str, str]):
-    """A :class:`NodeGroup` whose processes are always killed at teardown."""
+    """Yield a :class:`NodeGroup` whose processes are always killed at teardown."""
     group = NodeGroup(tmp_path, ros_env)
     try:
         yield group
@@ -144,7 +144,7 @@ class Probe:
 
 @pytest.fixture
 def probe(ros_env):
-    """A :class:`Probe` on the test's domain, always shut down."""
+    """Yield a :class:`Probe` on the test's domain, always shut down."""
     p = Probe()
     try:
         yield p

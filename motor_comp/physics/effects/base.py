@@ -47,7 +47,7 @@ class Effect:
         """Build from a model-file mapping; unknown or missing keys raise ParameterError."""
         params = dict(params or {})
         names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(params) - names)
+        unknown = sorted(set(params) - names, key=str)
         if unknown:
             raise ParameterError(
                 f'{cls.name}: unknown parameter {unknown[0]!r} (expected {sorted(names)})')

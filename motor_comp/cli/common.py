@@ -1,0 +1,78 @@
+"""Argument types and options shared by the ``motor-comp`` subcommands.
+
+One definition of each, so that every command answers the same bad value with the same
+one-line message (``motor-comp: error: argument --X: …``, exit status 2).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from pathlib import Path
+from typing import Any, Callable
+
+from motor_comp.errors import InputFileError
+
+
+def _float_type(requirement: str, ok: Callable[[float], bool]) -> Callable[[str], float]:
+    """Return an argparse type accepting a number for which ``ok`` holds."""
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
+        if not (math.isfinite(v) and ok(v)):
+            raise argparse.ArgumentTypeError(f'must be {requirement}, got {text!r}')
+        return v
+    parse.__doc__ = f'Argparse type: {requirement}.'
+    return parse
+
+
+#: argparse types: the number must be finite and ...
+positive_float = _float_type('a finite number > 0', lambda v: v > 0)
+nonnegative_float = _float_type('a finite number >= 0', lambda v: v >= 0)
+finite_float = _float_type('finite', lambda v: True)
+nonzero_float = _float_type('finite and non-zero', lambda v: v != 0)  # scale factors
+
+
+def add_json(p: argparse.ArgumentParser, *, help: str = 'print one JSON object on stdout'
+             ) -> None:
+    """Add ``--json`` (one JSON object on stdout; progress and warnings go to stderr)."""
+    p.add_argument('--json', action='store_true', help=help)
+
+
+def add_report(p: argparse.ArgumentParser, *,
+               help: str = 'write PNG figures and index.html here') -> None:
+    """Add ``--report DIR``."""
+    p.add_argument('--report', metavar='DIR', help=help)
+
+
+def check_output_file(path: str | os.PathLike, option: str) -> Path:
+    """Check, before any long computation, that ``path`` can be created as a file.
+
+    Raises :class:`InputFileError` naming the option and the path when the path is a
+    directory, or its directory does not exist, is not a directory or is not writable,
+    so that a long run is not lost at the last step.
+    """
+    out = Path(path)
+    parent = out.parent if str(out.parent) else Path('.')
+    if out.is_dir():
+        raise InputFileError(f'{option} {out}: is a directory, expected a file name')
+    if not parent.exists():
+        raise InputFileError(f'{option} {out}: directory {parent} does not exist')
+    if not parent.is_dir():
+        raise InputFileError(f'{option} {out}: {parent} is not a directory')
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InputFileError(f'{option} {out}: directory {parent} is not writable')
+    return out
+
+
+def jsonable(x: Any) -> Any:
+    """Replace non-finite floats by None, recursively (JSON has no NaN/Inf)."""
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [jsonable(v) for v in x]
+    return x
