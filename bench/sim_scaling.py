@@ -6,12 +6,8 @@ that the cost is linear (constant per step, no growth with history).  The refere
 real time (b = 1).  The machine may be shared: the fit uses the process CPU time
 (``time.process_time``), which other processes cannot inflate; wall time is shown too.
 
-The cost per step is constant for a given motion, but the motion changes: on this run
-the adaptive estimates reach their projection bounds after about a minute and the axis
-then hunts around every dwell target (sliding ~97 % of the physics steps instead of
-~50 %; a sliding physics step costs ~95 ns, a stuck one ~10 ns), so the µs per control step
-rises from about 0.75 to about 1.1 between the 100 s and the 300 s runs; the
-asymptotic factor of the fit is that of the hunting regime.
+The cost per step depends on the motion: a sliding physics step costs ~95 ns, a stuck
+one ~10 ns, so a run whose axis slides more of the time costs more per second.
 
 Usage: ``python bench/sim_scaling.py [--lengths 10,30,100,300,1000,3600]``
 """

@@ -201,7 +201,7 @@ def main() -> int:
                  f'{rt_jit:.0f}× RT ({ns_step:.0f} ns per control step)',
                  'python-control input_output_response', f'{rt_ref:.2f}× RT',
                  f'{rt_jit / rt_ref:.0f}'))
-    rows.append((f'simulate jit, same, {args.cli_seconds:g} s (mostly the hunting regime)',
+    rows.append((f'simulate jit, same, {args.cli_seconds:g} s (long run)',
                  f'{rt_long:.0f}× RT ({t_long / args.cli_seconds * 1e6:.0f} ns per control '
                  'step)', 'python-control input_output_response', f'{rt_ref:.2f}× RT',
                  f'{rt_long / rt_ref:.0f}'))

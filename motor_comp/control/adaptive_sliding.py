@@ -66,8 +66,8 @@ and stiction does not give, and each broken assumption has its own remedy:
    zone ``ε_θ`` covers the random noise only, whose square biases them (``s`` and
    ``ẍ_r`` share ``ė_f``: errors in variables).  The encoder's quantisation error is
    deterministic, bounded and averages out over a move; a dead zone of its size would
-   stop the θ̂ laws at ≈ 5 µm of error (measured: 18–53 % instead of 60–99 % of each
-   gap closed in 10 s).
+   stop the θ̂ laws at ≈ 5 µm of error (measured: the mass, fc, fv and ripple laws
+   close 18–53 % instead of 60–99 % of their gaps in 10 s).
 3. *Frozen at rest*: while ``|ẋ_d| <= v_rest = rest_counts·q/T`` (below one count per
    period the velocity is quantisation only) the friction is static — stiction holds
    any force up to f_s, not the sliding model — and ``d`` is not bounded by k*; there

@@ -9,8 +9,12 @@ Log times.  Stamped messages (JointState, Clock) are logged at their header stam
 lockstep run is logged in sim time and the same run twice gives the same data.
 ``Float64`` has no stamp: in lockstep each command answers exactly one measurement, so
 the k-th voltage is logged at the stamp of the k-th ``joint_states`` (deterministic,
-whatever the arrival order at the recorder); in realtime it is logged at its arrival
-time on the recorder's clock.
+whatever the arrival order at the recorder); in realtime the controller answers the
+newest measurement it has, so a voltage is logged at the stamp of the newest
+``joint_states`` received (1 ns later if that one already carries a command) — the
+stamps are the plant's sim time on the wall clock's axis, which lags the wall clock
+when the plant process slipped, so arrival times would misalign commands and samples
+by the slip.  Before the first measurement (watchdog zeros) the arrival time is used.
 
 Run parameters (documented choice): the recorder *queries* the other nodes'
 parameters through their standard parameter services (``nodes`` parameter: the node
@@ -163,6 +167,7 @@ class RecorderNode(ParamNode):
         self._pending_voltage: collections.deque[bytes] = collections.deque()
         self._last_ns = 0
         self._last_pair_ns = -1
+        self._last_volt_ns = -1
         self._last_rx = time.monotonic()
         self._closed = False
         self._changes: dict[str, str] = {}
@@ -223,7 +228,9 @@ class RecorderNode(ParamNode):
         self._write('joint_states', data, t_ns)
         # only the loop's own, advancing stamps pair with commands: a stray message
         # (e.g. injected by hand) is recorded but cannot shift the pairing
-        if self.timing is Timing.LOCKSTEP and t_ns > self._last_pair_ns:
+        if self.timing is Timing.REALTIME:
+            self._last_pair_ns = max(self._last_pair_ns, t_ns)
+        elif t_ns > self._last_pair_ns:
             self._last_pair_ns = t_ns
             if self._pending_voltage:   # its command overtook it on the way here
                 self._write('voltage', self._pending_voltage.popleft(), t_ns)
@@ -232,7 +239,12 @@ class RecorderNode(ParamNode):
 
     def _on_voltage(self, data: bytes) -> None:
         if self.timing is Timing.REALTIME:
-            self._write('voltage', data, self.get_clock().now().nanoseconds)
+            if self._last_pair_ns < 0:
+                t_ns = self.get_clock().now().nanoseconds
+            else:
+                t_ns = max(self._last_pair_ns, self._last_volt_ns + 1)
+            self._last_volt_ns = t_ns
+            self._write('voltage', data, t_ns)
         elif self._js_stamps:
             self._write('voltage', data, self._js_stamps.popleft())
         else:

@@ -81,7 +81,7 @@ def test_long_run_does_not_hunt_at_the_dwells(long_runs):
     # dwells of the last 30 s: measured 2 µm and 40 sign changes in 30 dwells; Tan's laws
     # 9 µm and ≈ 7 900 (hunting at ±3.5 mm/s around every target)
     assert late.dwell_error <= 3e-6 + 1e-12          # three counts of the 1 µm encoder
-    assert late.dwell_sign_changes <= 150
+    assert late.dwell_sign_changes <= 300            # ≤ 10 per dwell: settling, no cycle
     assert legacy.dwell_error >= 6e-6 and legacy.dwell_sign_changes >= 3000
 
 
