@@ -34,13 +34,17 @@ def main() -> int:
     ap.add_argument('--controller', default='npid')
     ap.add_argument('--feedforward', default='static+gms')
     ap.add_argument('--keep', type=Path, default=None, help='keep the MCAP and logs here')
+    ap.add_argument('--trace-memory', action='store_true',
+                    help="recorder: tracemalloc growth sites in its log ('memory:' lines)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix='motor_comp_soak_') as tmp:
         work = args.keep or Path(tmp)
         work.mkdir(parents=True, exist_ok=True)
         spec = RunSpec(output=work / 'soak.mcap', plant=args.plant,
                        controller=args.controller, feedforward=args.feedforward,
-                       duration=args.duration)
+                       duration=args.duration,
+                       extra_params={'recorder_node': {'trace_memory': args.trace_memory,
+                                                       'memory_log_interval': 20.0}})
         t0 = time.monotonic()
         run_nodes(spec, workdir=work, domain_id=private_domain_id(),
                   timeout=120 + 10 * args.duration, progress=True)
@@ -52,10 +56,14 @@ def main() -> int:
                 rows[m.group(1)] = tuple(float(g) for g in m.group(2, 3, 4))
             for m in _TIME.finditer(text):
                 stamps[m.group(2)] = float(m.group(1))
+        memory = [ln.split(': memory: ', 1)[1] for ln in
+                  (work / 'recorder_node.log').read_text(errors='replace').splitlines()
+                  if ': memory: ' in ln]
         t_read = time.monotonic()
         run = read_run(spec.output)
         t_read = time.monotonic() - t_read
         size = spec.output.stat().st_size / 2**20
+        run_msgs = sum(int(v) for k, v in run.metadata.items() if k.startswith('run/count:'))
     steps = int(round(args.duration * 1000))
     loop_s = stamps['run complete'] - stamps['peers matched']
     print(f'soak: {args.plant}/{args.controller}/{args.feedforward}, {args.duration:g} s sim '
@@ -70,6 +78,18 @@ def main() -> int:
         per_hour = (end - start) * 3600.0 / loop_s
         print(f'{name:<18} {cpu:>9.1f} {start:>16.2f} {end:>14.2f} {end - start:>13.2f} '
               f'{per_hour:>15.2f}')
+    for line in memory:
+        print(f'recorder {line}')
+    # steady state: slope between the second sample (past the warm-up of allocator pools
+    # and DDS buffers) and the last one, per hour of 1 kHz sim time
+    rss = [(float(m.group(1)), int(m.group(2))) for m in
+           (re.search(r'rss_mib=([\d.]+) .*messages=(\d+)', ln) for ln in memory) if m]
+    if len(rss) >= 3:
+        (r1, n1), (r2, n2) = rss[1], rss[-1]
+        per_msg = (r2 - r1) / max(n2 - n1, 1)
+        msgs_per_step = run_msgs / steps
+        print(f'recorder steady-state RSS slope: {per_msg * 2**20:.2f} B/message = '
+              f'{per_msg * msgs_per_step * 3.6e6:.2f} MiB per hour of 1 kHz sim time')
     return 0 if len(run) == steps else 1
 
 

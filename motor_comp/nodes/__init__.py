@@ -26,9 +26,16 @@ peers have matched (controller and recorder subscribe ``joint_states`` only afte
 other inputs matched), so nodes can start in any order.  A lockstep run reproduces
 :func:`motor_comp.control.simulate` bit for bit.
 
-Realtime: wall-clock timers at the control rate (plant, trajectory); the controller
-answers each measurement.  A plant tick the machine delayed by whole periods is caught
-up with the held command, so sim time stays on the wall clock.
+Realtime: wall-clock timers at the control rate (plant, trajectory).  The plant stamps
+its samples on the grid t0 + k·T, the trajectory publishes the reference of each grid
+point one period ahead, and the controller answers the newest measurement with the
+reference of the same stamp (extrapolated from the latest if it is missing), skipping
+a backlog.  If the plant process is descheduled for whole periods, its sim time slips
+(the world pauses with the simulator); a late controller is physical (the plant holds
+the last command).  ``realtime_priority`` (``motor-comp run --mode realtime``: 40)
+runs the loop processes under SCHED_FIFO; measured command delay at the plant p99
+0.8 ms, max 1.1 ms, against p99 1.1 ms, max 7.9 ms with normal scheduling
+(``bench/ros_loop.py``).
 
 QoS: reliable, depth 1000; publishers transient-local, subscribers volatile (so any
 ROS tool's publisher matches).  All nodes spin a :class:`~motor_comp.nodes.common.

@@ -352,6 +352,30 @@ class LeanLoop:
         return ran
 
 
+#: delay histograms of the realtime nodes: 0.1 ms bins, the last one collects ≥ 20 ms
+DELAY_BIN_NS = 100_000
+DELAY_BINS = 200
+
+
+def delay_percentiles(hist: Sequence[int]) -> dict[str, float]:
+    """Return p50/p99/max [s] (bin tops) of a :data:`DELAY_BINS` + 1 bin histogram."""
+    import numpy as np
+    h = np.asarray(hist)
+    n = int(h.sum())
+    if n == 0:
+        return {}
+    cum = np.cumsum(h)
+    top = DELAY_BIN_NS * 1e-9
+    return {'p50': (int(np.searchsorted(cum, 0.5 * n)) + 1) * top,
+            'p99': (int(np.searchsorted(cum, 0.99 * n)) + 1) * top,
+            'max': (int(np.flatnonzero(h)[-1]) + 1) * top}
+
+
+def format_delays(hist: Sequence[int]) -> str:
+    """``p50 x ms, p99 y ms, max z ms`` of a delay histogram."""
+    return ', '.join(f'{k} {v * 1e3:.1f} ms' for k, v in delay_percentiles(hist).items())
+
+
 def rss_mib() -> float:
     """Resident set size of this process [MiB] (Linux ``/proc/self/statm``)."""
     try:

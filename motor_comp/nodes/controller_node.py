@@ -68,14 +68,10 @@ from std_msgs.msg import Float64
 from motor_comp.control.controller import ControlMode, Feedforward, default_params, \
     make_controller
 from motor_comp.errors import ParameterError
-from motor_comp.nodes.common import DEFAULT_NAMESPACE, LOOP_QOS, REALTIME_PRIORITY, Param, \
-    ParamNode, SUB_QOS, TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, Timing, run_node, \
-    set_realtime_priority, stamp_to_ns
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, DELAY_BIN_NS, DELAY_BINS, LOOP_QOS, \
+    REALTIME_PRIORITY, SUB_QOS, TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, Param, \
+    ParamNode, Timing, format_delays, run_node, set_realtime_priority, stamp_to_ns
 from motor_comp.physics.config import PlantConfig, load_plant
-
-#: histogram of the sample age at command time (realtime): 0.1 ms bins up to 20 ms
-LATENCY_BIN_NS = 100_000
-LATENCY_BINS = 200
 
 BASE_PARAMS = (
     Param('plant', 'pmlm', 'Nominal plant: pmlm, ballscrew, or a plant YAML file',
@@ -139,7 +135,7 @@ class ControllerNode(ParamNode):
         self.duplicates = 0
         self.skipped = 0
         # realtime: age of each answered sample when its command leaves [0.1 ms bins]
-        self.latency_hist = np.zeros(LATENCY_BINS + 1, dtype=np.int64)
+        self.latency_hist = np.zeros(DELAY_BINS + 1, dtype=np.int64)
         self._rt_refs: dict[int, tuple[float, float, float]] = {}
         self._meas: tuple[int, float, float] | None = None   # pending (lockstep)
         self._meas_since = 0.0
@@ -288,8 +284,8 @@ class ControllerNode(ParamNode):
             if abs(lead) <= limit:   # same clock; otherwise (foreign stamps) use as it is
                 r, rv = r + lead * (rv + 0.5 * lead * ra), rv + lead * ra
         self._command((r, rv, ra), dt)
-        age = (time.time_ns() - t_ns) // LATENCY_BIN_NS
-        self.latency_hist[min(max(age, 0), LATENCY_BINS)] += 1
+        age = (time.time_ns() - t_ns) // DELAY_BIN_NS
+        self.latency_hist[min(max(age, 0), DELAY_BINS)] += 1
 
     def _command(self, ref: tuple[float, float, float], dt: float | None = None) -> None:
         _, y, vy = self._meas
@@ -325,23 +321,10 @@ class ControllerNode(ParamNode):
             self._stale = False
             self.get_logger().info('reference and measurement are back: control resumes')
 
-    def latency_percentiles(self) -> dict[str, float]:
-        """Realtime: p50/p99/max age [s] of the answered samples when their command left."""
-        h = self.latency_hist
-        n = int(h.sum())
-        if n == 0:
-            return {}
-        cum = np.cumsum(h)
-        edge = lambda i: (int(i) + 1) * LATENCY_BIN_NS * 1e-9   # noqa: E731 - bin top
-        return {'p50': edge(np.searchsorted(cum, 0.5 * n)),
-                'p99': edge(np.searchsorted(cum, 0.99 * n)),
-                'max': edge(np.flatnonzero(h)[-1])}
-
     def finish(self, executor: Any) -> None:
         """Log what the loop did (realtime: skipped backlog, duplicates, sample age)."""
         if self.timing is Timing.REALTIME:
-            pct = ', '.join(f'{k} {v * 1e3:.1f} ms' for k, v in
-                            self.latency_percentiles().items())
+            pct = format_delays(self.latency_hist)
             self.get_logger().info(f'timing: {self.steps} commands, {self.skipped} backlog '
                                    f'samples skipped, {self.duplicates} duplicates; sample '
                                    f'age at command (0.1 ms bins, last bin = 20 ms or '
@@ -374,7 +357,7 @@ class ControllerNode(ParamNode):
             self._watchdog_timer = self._make_watchdog(new['stale_timeout'])
         if {'mode', 'feedforward'} & changed.keys():
             self.get_logger().info(f'now {ctl.mode.label} + {ctl.feedforward.label} '
-                                   f'feedforward')
+                                   f'feedforward from command {self.steps}')
 
 
 def main(args: list[str] | None = None) -> int:

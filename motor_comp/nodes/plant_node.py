@@ -39,15 +39,17 @@ import math
 import time
 from typing import Any, Mapping
 
+import numpy as np
 from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from motor_comp.errors import ParameterError
-from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, \
-    REALTIME_PRIORITY, Param, ParamNode, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, \
-    TOPIC_VOLTAGE, Timing, period_ns, run_node, set_realtime_priority, set_stamp
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, DELAY_BIN_NS, DELAY_BINS, JOINT_NAME, \
+    LOOP_QOS, REALTIME_PRIORITY, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, TOPIC_VOLTAGE, \
+    Param, ParamNode, Timing, format_delays, period_ns, run_node, set_realtime_priority, \
+    set_stamp
 from motor_comp.physics.config import load_plant
 from motor_comp.physics.plant import Plant, StepLoad
 
@@ -107,6 +109,8 @@ class PlantNode(ParamNode):
         self.late = 0
         self._t0_ns: int | None = None
         self._slip_ns = 0                   # realtime: sim time behind the wall clock
+        # realtime: command arrival after the latest sample's publication (loop delay)
+        self.delay_hist = np.zeros(DELAY_BINS + 1, dtype=np.int64)
         self._tick_ns: int | None = None   # realtime: wall time of the last measurement
         self._sub_done = 0                  # realtime: physics steps done in this period
         self.n_sub = self.plant.substeps(self.dt)
@@ -231,7 +235,9 @@ class PlantNode(ParamNode):
         if 0 < self.n_steps <= self.k:
             self._finished = True
             self.get_logger().info(f'run complete: {self.k} steps in realtime, sim time '
-                                   f'slipped {self.late} periods behind the wall clock')
+                                   f'slipped {self.late} periods behind the wall clock; '
+                                   f'command arrival after the last sample: '
+                                   f'{format_delays(self.delay_hist)}')
             return
         self._publish_measurement(self._t0_ns + self.k * self.dt_ns)
         self._tick_ns = now
@@ -241,6 +247,7 @@ class PlantNode(ParamNode):
         """Run the period up to now with the old command, then hold ``u``."""
         if self._tick_ns is not None and not self._finished:
             elapsed = self.get_clock().now().nanoseconds - self._tick_ns
+            self.delay_hist[min(elapsed // DELAY_BIN_NS, DELAY_BINS)] += 1
             n = min(self.n_sub, int(elapsed // self.phys_ns))
             if n > self._sub_done:
                 self._advance_substeps(n - self._sub_done)

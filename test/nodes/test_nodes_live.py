@@ -117,6 +117,24 @@ def test_live_reconfiguration_and_fault_tolerance(tmp_path: Path, nodes, probe) 
     assert 'ignored measurement with missing or non-finite' in _log(nodes, 'controller_node')
     assert 'ignored reference with missing or non-finite' in _log(nodes, 'controller_node')
 
+    # -- bumpless switching through the parameter service (Controller.set_mode/
+    # set_feedforward re-balance the integrator to the last output): the step at the
+    # switch (the controller logs the index of the first command of the new law) stays
+    # within twice the largest step-to-step change of the 50 commands on either side.
+    # Offline on this loop a switch *without* re-balancing jumps 10–23 V (adaptive →
+    # npid during a move) or 0.13–0.27 V at rest, where the loop moves < 0.01 V per step;
+    # with it the step is 0.002–0.22 V, within the natural variation.
+    for change in ({'mode': 'npid'}, {'feedforward': 'static'}):
+        res = probe.set_parameters('controller_node', **change)
+        assert res[0].successful, res[0].reason
+        label = f'now npid + {change.get("feedforward", "none")} feedforward from command '
+        probe.spin_until(lambda: label in _log(nodes, 'controller_node'), 20, 'switch log')
+        k = int(re.search(re.escape(label) + r'(\d+)', _log(nodes, 'controller_node'))[1])
+        probe.spin_until(lambda: len(probe.voltages) >= k + 60, 30, 'switched commands')
+        du = np.abs(np.diff(np.array(probe.voltages[k - 51:k + 51])))   # du[50]: u_k − u_k-1
+        natural = max(du[:50].max(), du[51:].max())
+        assert du[50] <= 2.0 * natural, (change, du[50], natural)
+
     # -- SIGKILL of recorder B mid-run: its file is readable up to the last chunk ------
     nodes.stop('recorder_b', sig=signal.SIGKILL)
 

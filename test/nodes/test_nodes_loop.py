@@ -89,6 +89,30 @@ def test_lockstep_nodes_equal_in_process_simulator(tmp_path: Path, ros_env) -> N
     assert meta['params:trajectory_node/trajectory'] == 'sine'
     assert meta['run/count:/axis/voltage'] == str(n)
 
+    # the run describes itself like `motor-comp simulate -o` does, so the workbench's
+    # closed-loop replay works on a ROS recording: with the true plant model it is the
+    # simulator's run again (lockstep = simulator, bit for bit), with coulomb friction
+    # left out of the model it visibly is not
+    assert (meta['plant'], meta['controller'], meta['feedforward']) == \
+        ('ballscrew', 'npid', 'static+gms')
+    assert json.loads(meta['trajectory']) == make_trajectory('sine').params()
+    true_model, wrong_model = tmp_path / 'true.yaml', tmp_path / 'wrong.yaml'
+    cfg.model.save(true_model)
+    cfg.model.without('coulomb').save(wrong_model)
+    replays = {}
+    for model in (true_model, wrong_model):
+        out_cmp = subprocess.run([sys.executable, '-m', 'motor_comp.cli.main', 'compare',
+                                  str(out), '--model', str(model), '--json'],
+                                 capture_output=True, text=True, timeout=110)
+        assert out_cmp.returncode == 0, out_cmp.stderr
+        report = json.loads(out_cmp.stdout)
+        assert report['replay_note'] == 'ok'
+        replays[model.stem] = report['replay']
+    assert replays['true']['rms_difference'] <= 1e-12
+    assert replays['true']['rms_error_model'] == pytest.approx(
+        replays['true']['rms_error_measured'], rel=1e-9)
+    assert replays['wrong']['rms_difference'] > 1e-7
+
 
 def fifo_permitted() -> bool:
     """Tell whether a process may switch itself to SCHED_FIFO here."""

@@ -1,0 +1,70 @@
+"""The controller's stale-data watchdog follows ``stale_timeout`` changed at run time.
+
+In-process (no other node): a lockstep measurement whose reference never comes must be
+answered with 0 V after ``stale_timeout``, the new value as soon as it is set — the
+watchdog's period is ``min(50 ms, stale_timeout/4)`` and used to stay at its start value.
+"""
+from __future__ import annotations
+
+import time
+
+import pytest
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+
+pytestmark = pytest.mark.timeout(60)
+
+
+@pytest.fixture
+def controller(ros_env):
+    """Yield a lockstep ``ControllerNode`` in this process, on its own context."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from motor_comp.nodes.controller_node import ControllerNode
+
+    rclpy.init()
+    node = ControllerNode()
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        yield node, executor
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def _zero_latency(node, executor, timeout: float) -> float | None:
+    """Inject a measurement with no reference; seconds until the node commands 0 V."""
+    sent: list[float] = []
+    node.pub.publish = lambda msg: sent.append(time.monotonic())   # capture, no DDS
+    t0 = time.monotonic()
+    node._on_measurement(JointState(name=['axis'], position=[0.0], velocity=[0.0]))
+    while time.monotonic() - t0 < timeout and not sent:
+        executor.spin_once(timeout_sec=0.001)
+    return sent[0] - t0 if sent else None
+
+
+def test_stale_timeout_takes_effect_at_run_time(controller) -> None:
+    """0.5 s → 0.02 s: watchdog period 50 ms → 5 ms, the zero comes after ≈ 20 ms."""
+    node, executor = controller
+    assert node._watchdog_timer.timer_period_ns == 50_000_000   # min(50 ms, 0.5 s / 4)
+    result = node.set_parameters([Parameter('stale_timeout', value=0.02)])
+    assert result[0].successful
+    assert node._watchdog_timer.timer_period_ns == 5_000_000
+    latency = _zero_latency(node, executor, 2.0)
+    assert latency is not None and latency >= 0.02
+    # nominally ≤ 25 ms; the slack is for a loaded machine (the 0.5 s value would give
+    # ≥ 500 ms, so this still tells the two apart)
+    assert latency < 0.25
+
+    # a reference (of another step) ends the stale state; a longer timeout holds off
+    # the zero for the next waiting measurement
+    ref = JointState(name=['axis'], position=[0.0], velocity=[0.0], effort=[0.0])
+    ref.header.stamp.sec = 5
+    node._on_reference(ref)
+    assert not node._stale
+    assert node.set_parameters([Parameter('stale_timeout', value=1.0)])[0].successful
+    assert node._watchdog_timer.timer_period_ns == 50_000_000
+    assert _zero_latency(node, executor, 0.6) is None
