@@ -26,17 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from motor_comp.physics.effects import VOCABULARY  # noqa: E402
 from motor_comp.workbench import diagnose, fit, kinematics  # noqa: E402
-from motor_comp.workbench.synthetic import scenario  # noqa: E402
-
-
-def recovered(model, name):
-    """Scalar parameters of the fitted effect, named like the scenario truth."""
-    e = model.get(name)
-    if name == 'presliding':
-        return {'stiffness': e.stiffness}
-    if name == 'ripple':
-        return {'period': e.period, 'amplitude_1': float(e.amplitudes[0])}
-    return e.params()
+from motor_comp.workbench.synthetic import recovered, scenario  # noqa: E402
 
 
 def param_error(name, got, truth):

@@ -111,6 +111,8 @@ class PlantNode(ParamNode):
         self._slip_ns = 0                   # realtime: sim time behind the wall clock
         # realtime: command arrival after the latest sample's publication (loop delay)
         self.delay_hist = np.zeros(DELAY_BINS + 1, dtype=np.int64)
+        # realtime: |tick-to-tick interval − T|, the control period jitter
+        self.jitter_hist = np.zeros(DELAY_BINS + 1, dtype=np.int64)
         self._tick_ns: int | None = None   # realtime: wall time of the last measurement
         self._sub_done = 0                  # realtime: physics steps done in this period
         self.n_sub = self.plant.substeps(self.dt)
@@ -237,9 +239,13 @@ class PlantNode(ParamNode):
             self.get_logger().info(f'run complete: {self.k} steps in realtime, sim time '
                                    f'slipped {self.late} periods behind the wall clock; '
                                    f'command arrival after the last sample: '
-                                   f'{format_delays(self.delay_hist)}')
+                                   f'{format_delays(self.delay_hist)}; control period '
+                                   f'jitter: {format_delays(self.jitter_hist)}')
             return
         self._publish_measurement(self._t0_ns + self.k * self.dt_ns)
+        if self._tick_ns is not None:
+            jitter = abs(now - self._tick_ns - self.dt_ns)
+            self.jitter_hist[min(jitter // DELAY_BIN_NS, DELAY_BINS)] += 1
         self._tick_ns = now
         self._sub_done = 0
 

@@ -110,6 +110,16 @@ def hidden_effect(name: str, rng: np.random.Generator) -> tuple[Any, dict]:
     return make_effect(name, p), dict(p)
 
 
+def recovered(model: AxisModel, name: str) -> dict[str, float]:
+    """Scalar parameters of a fitted effect, named like :func:`hidden_effect`'s truth."""
+    e = model.get(name)
+    if name == 'presliding':
+        return {'stiffness': e.stiffness}
+    if name == 'ripple':
+        return {'period': e.period, 'amplitude_1': float(e.amplitudes[0])}
+    return e.params()
+
+
 def scenario(names: tuple[str, ...] | str, *, seed: int = 0) -> Scenario:
     """Plant = base (+ hidden effects); model = base without them.
 

@@ -8,11 +8,6 @@ feedforward, to the last bits that libm and numpy's scalar functions may differ 
 """
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
@@ -32,18 +27,11 @@ result = {'u': res.voltage.tolist(), 'y': res.position.tolist(),
 @pytest.mark.parametrize('mode,ff,traj', [
     ('adaptive_sliding', 'none', None),
     ('pid', 'static', ('sine', {'amplitude': 2e-4, 'period': 0.1}))])
-def test_compiled_loop_equals_pure_python_loop(mode, ff, traj):
+def test_compiled_loop_equals_pure_python_loop(mode, ff, traj, jit_and_pure):
     make = "default_trajectory('pmlm')" if traj is None else \
         f'make_trajectory({traj[0]!r}, **{traj[1]!r})'
     src = _RUN.replace('MODE', repr(mode)).replace('FF', repr(ff)).replace('TRAJ', make)
-    child = src + '\nimport json, sys\njson.dump(result, sys.stdout)\n'
-    env = dict(os.environ, NUMBA_DISABLE_JIT='1')
-    out = subprocess.run([sys.executable, '-c', child], env=env, capture_output=True,
-                         text=True, timeout=240, check=True)
-    pure = json.loads(out.stdout)
-    ns: dict = {}
-    exec(compile(src, '<loop-run>', 'exec'), ns)      # the same source, compiled loop
-    jit = ns['result']
+    jit, pure = jit_and_pure(src)
     for key in ('u', 'y', 'x', 'f', 'rip', 'th'):
         np.testing.assert_allclose(jit[key], pure[key], rtol=1e-9, atol=1e-12, err_msg=key)
     x = np.array(jit['x'])

@@ -7,11 +7,6 @@ give the numbers of its pure-Python run (``NUMBA_DISABLE_JIT=1``) on every effec
 """
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -189,16 +184,9 @@ def _cases():
             'every_gms': gms, 'delta2': delta2}
 
 
-def test_compiled_kernel_equals_its_pure_python_run_on_every_effect():
+def test_compiled_kernel_equals_its_pure_python_run_on_every_effect(jit_and_pure):
     src = _RUN.replace('STEPS', '300').replace('CASES', repr(_cases()))
-    child = src + '\nimport json, sys\njson.dump(result, sys.stdout)\n'
-    env = dict(os.environ, NUMBA_DISABLE_JIT='1')
-    out = subprocess.run([sys.executable, '-c', child], env=env, capture_output=True,
-                         text=True, timeout=240, check=True)
-    pure = json.loads(out.stdout)
-    ns: dict = {}
-    exec(compile(src, '<kernel-run>', 'exec'), ns)    # the same source, compiled kernel
-    jit = ns['result']
+    jit, pure = jit_and_pure(src)
     assert set(pure) == set(jit) == set(_cases())
     for name in jit:
         a, b = np.array(jit[name]), np.array(pure[name])

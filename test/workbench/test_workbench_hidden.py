@@ -13,7 +13,7 @@ import pytest
 
 from motor_comp.physics.effects import VOCABULARY
 from motor_comp.workbench import diagnose, fit, kinematics
-from motor_comp.workbench.synthetic import scenario
+from motor_comp.workbench.synthetic import recovered, scenario
 
 DURATION = 15.0   # s at 1 kHz: enough reversals and travel, and fast
 
@@ -31,16 +31,6 @@ TOLERANCE = {
 }
 #: absolute tolerances [SI]
 ABS_TOLERANCE = {'delay': {'tau': 1e-3}, 'spring': {'x0': 2e-3}, 'stribeck': {'delta': 0.7}}
-
-
-def recovered(model, name):
-    """Scalar parameters of the fitted effect, named like the scenario truth."""
-    e = model.get(name)
-    if name == 'presliding':
-        return {'stiffness': e.stiffness}
-    if name == 'ripple':
-        return {'period': e.period, 'amplitude_1': float(e.amplitudes[0])}
-    return e.params()
 
 
 @pytest.fixture(scope='module')
