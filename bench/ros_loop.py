@@ -16,7 +16,8 @@ private domain):
    a sample's publication to the next command's arrival at the plant (p50/p99/max,
    from the plant's ``run complete`` log line), the control period jitter
    ``|tick interval − T|`` of the plant's timer (p50/p99/max; goal p99 < 0.5 ms), the
-   backlog samples the controller skipped and the periods the plant's sim time slipped.  (Recorded stamps
+   backlog samples the controller skipped and the periods the plant's sim time
+   slipped.  (Recorded stamps
    are the plant's sample grid t0 + k·T, so the recording itself no longer shows the
    timer jitter.)
 
