@@ -25,21 +25,17 @@ import numpy as np
 from numba import njit
 
 from motor_comp.control._jitcache import JIT_INLINE
-from motor_comp.control.params import ParamsBase, spec
+from motor_comp.control.params import spec
+from motor_comp.control.pid import PIDParams
 from motor_comp.errors import ParameterError
 from motor_comp.physics.axis import AxisModel
 
 
 @dataclasses.dataclass(frozen=True)
-class NPIDParams(ParamsBase):
-    """N-PID tunables: the base PID (ball-screw loop-shaping design) and k(e)."""
+class NPIDParams(PIDParams):
+    """N-PID tunables: the base PID's (the ball-screw loop-shaping design) and k(e)."""
 
     label = 'npid'
-    kp: float = spec(8315.15, 'V/m', 'base PID proportional gain', 0.0, 1e9)
-    ki: float = spec(8.3144e5, 'V/(m·s)', 'base PID integral gain', 0.0, 1e12)
-    kd: float = spec(202.85, 'V·s/m', 'base PID derivative gain', 0.0, 1e7)
-    tf: float = spec(1e-5, 's', 'derivative filter time constant', 0.0, 1.0)
-    u_max: float = spec(math.inf, 'V', 'output saturation ±u_max', 1e-6, math.inf)
     k0: float = spec(15000.0, '1/m', 'rate of the nonlinear gain (Chiew: 15 /mm)', 0.0, 1e7)
     e_max: float = spec(1e-4, 'm', 'error range of the nonlinear gain (Chiew: 0.1 mm)',
                         1e-9, 1.0)
