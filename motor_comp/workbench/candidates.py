@@ -134,26 +134,27 @@ def fit_mass(ctx: FitContext, train: np.ndarray,
                         ctx.model.replace(mass=mass))
 
 
+def _fit_friction_level(ctx: FitContext, train: np.ndarray, cls: type, key: str
+                        ) -> CandidateFit:
+    """One non-negative friction coefficient ``key`` of ``cls`` from its regressor."""
+    res = ctx.res
+    theta, _ = _linear(ctx, cls().regressors(res.x, res.v), train)
+    eff = cls(**{key: max(float(theta[0]), 0.0)})
+    pred = ctx.kin.smooth(eff.force(res.x, res.v))
+    return CandidateFit(eff.name, eff.params(), {key: getattr(eff, key)}, pred, 1,
+                        ctx.model.with_effect(eff))
+
+
 def fit_coulomb(ctx: FitContext, train: np.ndarray,
                 start: CandidateFit | None = None) -> CandidateFit:
     """Coulomb level from the regressor ``sgn ẋ``."""
-    res = ctx.res
-    theta, _ = _linear(ctx, Coulomb().regressors(res.x, res.v), train)
-    eff = Coulomb(fc=max(float(theta[0]), 0.0))
-    pred = ctx.kin.smooth(eff.force(res.x, res.v))
-    return CandidateFit('coulomb', eff.params(), {'fc': eff.fc}, pred, 1,
-                        ctx.model.with_effect(eff))
+    return _fit_friction_level(ctx, train, Coulomb, 'fc')
 
 
 def fit_viscous(ctx: FitContext, train: np.ndarray,
                 start: CandidateFit | None = None) -> CandidateFit:
     """Viscous coefficient from the regressor ``ẋ``."""
-    res = ctx.res
-    theta, _ = _linear(ctx, Viscous().regressors(res.x, res.v), train)
-    eff = Viscous(fv=max(float(theta[0]), 0.0))
-    pred = ctx.kin.smooth(eff.force(res.x, res.v))
-    return CandidateFit('viscous', eff.params(), {'fv': eff.fv}, pred, 1,
-                        ctx.model.with_effect(eff))
+    return _fit_friction_level(ctx, train, Viscous, 'fv')
 
 
 def fit_offset(ctx: FitContext, train: np.ndarray,
