@@ -9,12 +9,12 @@ STAMP   = $(VENV)/.motor_comp-installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE = LOCALHOST
 export RMW_IMPLEMENTATION ?= rmw_fastrtps_cpp
 
-.PHONY: setup demo test lint bench clean
+.PHONY: setup demo test lint bench stress clean
 
 $(STAMP): setup.py setup.cfg package.xml
-	$(PYTHON) -m venv $(VENV)
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[ros,test,bench]'
+	$(PY) -m pip install --quiet -e '.[ros,test,bench,cluster]'
 	touch $(STAMP)
 
 setup: $(STAMP)
@@ -31,6 +31,10 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/run_all.py
+
+# node tests N times in a row while two CPU-bound processes load both cores
+stress: $(STAMP)
+	test/stress_nodes.sh $(or $(N),30)
 
 clean:
 	rm -rf build install log demo_out .pytest_cache

@@ -5,7 +5,7 @@ from setuptools import find_packages, setup
 
 PACKAGE = 'motor_comp'
 
-NODES = ('trajectory_node', 'plant_node', 'controller_node', 'recorder_node')
+NODES = ('trajectory_node', 'plant_node', 'controller_node', 'recorder_node', 'monitor_node')
 
 setup(
     name=PACKAGE,
@@ -38,6 +38,13 @@ setup(
             'ros-jazzy-sensor-msgs',
             'ros-jazzy-rosgraph-msgs',
             'ros-jazzy-rmw-fastrtps-cpp',
+            # managed (lifecycle) nodes and the live model monitor's /diagnostics
+            'ros-jazzy-lifecycle-msgs',
+            'ros-jazzy-diagnostic-msgs',
+        ],
+        # Dask cluster sweeps (`motor-comp sweep --scheduler ...`)
+        'cluster': [
+            'distributed>=2024.1',
         ],
         'test': [
             'pytest>=7',
@@ -50,6 +57,7 @@ setup(
             'rosbags>=0.9',
             'control>=0.9.4',
             'colcon-common-extensions',
+            'distributed>=2024.1',
         ],
         'bench': [
             'rosbags>=0.9',

@@ -26,7 +26,9 @@ Usage: ``python bench/ros_loop.py [--steps N] [--lockstep-s S] [--realtime-s S]`
 from __future__ import annotations
 
 import argparse
+import os
 import re
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -104,11 +106,23 @@ def bare_round_trip(n: int, loop: str) -> float:
 _LOG_TIME = re.compile(r'\[INFO\] \[(\d+\.\d+)\] \[[^\]]*plant_node\]: (.*)')
 
 
-def lockstep_rate(duration: float, workdir: Path) -> tuple[float, int]:
+def lockstep_rate(duration: float, workdir: Path,
+                  profile: Path | None = None) -> tuple[float, int]:
     """Control steps per wall second of a lockstep run of ``duration`` sim seconds."""
     spec = RunSpec(output=workdir / 'lockstep.mcap', plant='pmlm', controller='pid',
                    duration=duration)
-    run_nodes(spec, workdir=workdir, domain_id=private_domain_id(), progress=False)
+    if profile is not None:   # the node processes inherit it (common._profiler)
+        profile.mkdir(parents=True, exist_ok=True)
+        os.environ['MOTOR_COMP_PROFILE'] = str(profile.resolve())
+    try:
+        run_nodes(spec, workdir=workdir, domain_id=private_domain_id(), progress=False)
+    finally:
+        os.environ.pop('MOTOR_COMP_PROFILE', None)
+    if profile is not None:
+        import pstats
+        for prof in sorted(profile.glob('*.prof')):
+            print(f'--- {prof.stem}: top functions by own time')
+            pstats.Stats(str(prof)).sort_stats('tottime').print_stats(8)
     start = end = None
     for line in (workdir / 'plant_node.log').read_text().splitlines():
         m = _LOG_TIME.search(line)
@@ -147,17 +161,37 @@ def main() -> int:
     ap.add_argument('--steps', type=int, default=5000)
     ap.add_argument('--loop', choices=('executor', 'lean'), default='executor')
     ap.add_argument('--lockstep-s', type=float, default=10.0)
-    ap.add_argument('--realtime-s', type=float, default=5.0)
+    ap.add_argument('--realtime-s', type=float, default=5.0,
+                    help='realtime run length [s] (0 = skip the realtime runs)')
+    ap.add_argument('--repeat', type=int, default=1,
+                    help='alternate reference and lockstep runs this often (median)')
+    ap.add_argument('--profile', type=Path, default=None, metavar='DIR',
+                    help="lockstep: cProfile each node's spin loop into DIR/<node>.prof "
+                         'and print the top functions')
     args = ap.parse_args()
     if args.role:
         _pingpong(args.role, args.steps, args.loop)
         return 0
-    rt = bare_round_trip(args.steps, 'executor')
-    rt_lean = bare_round_trip(args.steps, 'lean')
-    with tempfile.TemporaryDirectory() as tmp:
-        rate, steps = lockstep_rate(args.lockstep_s, Path(tmp))
+    for name in ('steps', 'repeat'):
+        if getattr(args, name) < 1:
+            ap.error(f'--{name} must be >= 1')
+    if not args.lockstep_s > 0 or not args.realtime_s >= 0:
+        ap.error('--lockstep-s must be > 0 and --realtime-s >= 0')
+    # interleaved: the machine's load drifts (other work on the shared cores), so each
+    # lockstep run sits between reference runs, and the medians are compared
+    rts, leans, rates = [], [], []
+    for _ in range(args.repeat):
+        rts.append(bare_round_trip(args.steps, 'executor'))
+        leans.append(bare_round_trip(args.steps, 'lean'))
+        with tempfile.TemporaryDirectory() as tmp:
+            rate, steps = lockstep_rate(args.lockstep_s, Path(tmp), args.profile)
+        rates.append(rate)
+    rt, rt_lean, rate = (statistics.median(v) for v in (rts, leans, rates))
+    if args.repeat > 1:
+        print('runs (reference round trips/s, LeanLoop, lockstep steps/s, ratio): ' + '; '.join(
+            f'{a:.0f}, {b:.0f}, {c:.0f}, {c / a:.2f}' for a, b, c in zip(rts, leans, rates)))
     lat = {}
-    for prio in (0, DEFAULT_RT_PRIORITY):
+    for prio in ((0, DEFAULT_RT_PRIORITY) if args.realtime_s > 0 else ()):
         with tempfile.TemporaryDirectory() as tmp:
             lat[prio] = realtime_latency(args.realtime_s, Path(tmp), prio)
     print(f'{"measurement":<46} {"value":>12} {"ratio":>10}')

@@ -23,7 +23,10 @@ SCRIPTS = (
     'analysis_speed.py',
     'analysis_scaling.py',
     'workbench.py',
+    'workbench_independent.py',
     'reproduce_papers.py',
+    'compensation_loop.py',
+    'sweep_speed.py',
     'ros_loop.py',
     'soak.py',
 )

@@ -32,6 +32,9 @@ ARGS = {
     'control_rate': ('1000.0', 'control rate [Hz]'),
     'duration': ('0.0', 'sim time [s] before the plant exits; 0 = until Ctrl-C'),
     'output': ('run.mcap', 'MCAP file written by the recorder'),
+    'autostart': ('true', 'plant, controller, recorder configure and activate themselves; '
+                  'false = they wait unconfigured for a lifecycle manager '
+                  '(ros2 lifecycle set /axis/<node> configure|activate …)'),
 }
 
 
@@ -47,11 +50,14 @@ def generate_launch_description() -> LaunchDescription:
     """The four nodes in one namespace, shut down together when the plant is done."""
     timing = {'timing': _arg('timing'), 'control_rate': _arg('control_rate', float)}
     overrides = {
-        'plant_node': {**timing, 'plant': _arg('plant'), 'duration': _arg('duration', float)},
+        'plant_node': {**timing, 'plant': _arg('plant'), 'duration': _arg('duration', float),
+                       'autostart': _arg('autostart', bool)},
         'trajectory_node': {**timing, 'trajectory': _arg('trajectory')},
         'controller_node': {**timing, 'plant': _arg('plant'), 'mode': _arg('mode'),
-                            'feedforward': _arg('feedforward')},
-        'recorder_node': {'timing': _arg('timing'), 'output': _arg('output')},
+                            'feedforward': _arg('feedforward'),
+                            'autostart': _arg('autostart', bool)},
+        'recorder_node': {'timing': _arg('timing'), 'output': _arg('output'),
+                          'autostart': _arg('autostart', bool)},
     }
     actions = [DeclareLaunchArgument(name, default_value=default, description=text)
                for name, (default, text) in ARGS.items()]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from typing import Any, ClassVar, Iterator
 
 import numpy as np
 
@@ -86,14 +86,27 @@ class RunMetrics:
         """Number of reversals with a glitch."""
         return len(self.glitches)
 
-    def as_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (DESIGN.md §6 keys: rms_error, max_error, max_glitch, …)."""
-        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        d['glitches'] = [g.as_dict() for g in self.glitches]
-        d['segments'] = [dataclasses.asdict(s) for s in self.segments]
-        d['moves'] = [dataclasses.asdict(m) for m in self.moves]
+    def as_dict(self, *, records: bool = True) -> dict[str, Any]:
+        """JSON-ready dict (DESIGN.md §6 keys: rms_error, max_error, max_glitch, …).
+
+        ``records=False`` leaves out the per-reversal lists (``glitches``,
+        ``segments``, ``moves``), which :meth:`records` yields one by one instead.
+        """
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+             if not (f.name in self.RECORDS)}
+        if records:
+            for name, items in self.records():
+                d[name] = list(items)
         d['glitch_count'] = self.glitch_count
         return d
+
+    RECORDS: ClassVar[tuple[str, ...]] = ('glitches', 'segments', 'moves')
+
+    def records(self) -> Iterator[tuple[str, Iterator[dict[str, Any]]]]:
+        """Yield ``(name, dicts)`` for glitches, segments and moves, lazily."""
+        yield 'glitches', (g.as_dict() for g in self.glitches)
+        yield 'segments', (dataclasses.asdict(s) for s in self.segments)
+        yield 'moves', (dataclasses.asdict(m) for m in self.moves)
 
 
 def _weights(t: np.ndarray) -> np.ndarray:
@@ -150,6 +163,8 @@ def _segments(t: np.ndarray, e: np.ndarray, w: np.ndarray, tr: np.ndarray
               ) -> tuple[Segment, ...]:
     edges = np.concatenate(([t[0]], tr, [t[-1] + 1e-12]))
     idx = np.searchsorted(t, edges, side='left')
+    idx[-1] = t.size        # the last stroke ends with the last sample, even where
+    #                         1e-12 s is below the spacing of t (t > ~8000 s)
     out = []
     for k in range(edges.size - 1):
         a, b = idx[k], idx[k + 1]

@@ -15,9 +15,15 @@ from typing import Any
 from motor_comp.cli.common import add_json, add_report, jsonable, positive_float
 
 
-def add_common(p: argparse.ArgumentParser) -> None:
-    """Arguments shared by compare, diagnose and fit."""
-    p.add_argument('run', metavar='RUN.mcap', help='measured run (MCAP; import CSV/MAT first)')
+def add_common(p: argparse.ArgumentParser, *, several: bool = False) -> None:
+    """Arguments shared by compare, diagnose and fit (``several``: one or more runs)."""
+    if several:
+        p.add_argument('run', metavar='RUN.mcap', nargs='+',
+                       help='measured run(s) (MCAP; import CSV/MAT first); several runs '
+                            'are one experiment: one model is fitted on all of them')
+    else:
+        p.add_argument('run', metavar='RUN.mcap',
+                       help='measured run (MCAP; import CSV/MAT first)')
     p.add_argument('--model', required=True, metavar='MODEL.yaml', help='model file')
     add_json(p, help='print one JSON object to stdout')
     p.add_argument('--window', type=positive_float, default=0.02, metavar='S',
@@ -26,8 +32,9 @@ def add_common(p: argparse.ArgumentParser) -> None:
                    help='logged input is a held command (zoh, default for voltage) or a '
                         'sampled measurement (sample, default for current/force)')
     p.add_argument('--rotary', action='store_true',
-                   help='the position is an angle [rad] (rotary axis): angles in mrad, '
-                        'periods also in cycles/rev')
+                   help='treat the axis as rotary even if the model file has no '
+                        '"axis: rotary" (angles in rad, torques in N·m, periods also in '
+                        'cycles/rev)')
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -54,17 +61,17 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``compare``."""
     from motor_comp.workbench import compare, open_session
     from motor_comp.workbench import report as rep
-    s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold)
+    s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold,
+                     rotary=args.rotary)
+    rotary = s.model.units.rotary
     cmp = compare(s.run, s.kin, s.model, horizon=args.horizon)
-    white = rep.whiteness(s.kin, cmp.residual)
-    text = cmp.summary(rotary=args.rotary) + (
-        f'\nwhiteness: {100 * white.auto_outside:.0f} % of autocorrelation lags outside '
-        f'the 99 % band, {100 * white.cross_outside:.0f} % of input cross-correlation')
+    white = rep.whiteness(s.kin, cmp.residual, closed_loop=rep.is_closed_loop(s.run))
+    text = cmp.summary(rotary=rotary) + '\n' + white.sentence()
     data = cmp.as_dict()
     data['whiteness'] = white.as_dict()
     if args.report:
         out = rep.prepare_dir(args.report)
-        figs = rep.residual_figures(out, s.kin, cmp.residual, rotary=args.rotary)
+        figs = rep.residual_figures(out, s.kin, cmp.residual, rotary=rotary)
         figs.append(rep.prediction_figure(out, s.kin, cmp.prediction))
         page = rep.write_html(out, f'compare: {s.kin.name} vs {args.model}', text, figs)
         data['report'] = str(page)

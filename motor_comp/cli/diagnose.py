@@ -1,10 +1,13 @@
-"""``motor-comp diagnose RUN --model MODEL.yaml``: find the effect a model is missing.
+"""``motor-comp diagnose RUN [RUN2 ...] --model MODEL.yaml``: what is wrong with a model.
 
-Every effect of the vocabulary not in the model (and a mass refit) is fitted to the
-force residual and ranked by the fraction of it removed on held-out time blocks;
-prints the finding in plain words; ``--json`` prints ``{baseline: {force_nrmse, …},
-candidates: [{effect, explained, force_nrmse, params, uncertainty, supported, …}]}``
-(DESIGN.md §6), best first; ``--report DIR`` adds the residual views.
+First the model's own parameters are refitted jointly (a wrong parameter is the first
+finding: "fc is 10.0 ± 0.1 N, not 5.0 N"); then every effect the model lacks is scored
+as model + effect with all linear parameters re-estimated together, on held-out folds
+of short interleaved blocks; prints the finding in plain words, the pairs this run
+cannot tell apart and what the experiment lacks.  Several runs are one experiment.
+``--json`` prints ``{baseline: {force_nrmse, …}, refit, candidates: [{effect,
+explained, force_nrmse, params, uncertainty, supported, …}], identifiability,
+experiment}`` (DESIGN.md §6), best first; ``--report DIR`` adds the residual views.
 """
 from __future__ import annotations
 
@@ -26,7 +29,8 @@ def fraction(text: str) -> float:
 def add_diagnose_options(p: argparse.ArgumentParser) -> None:
     """Options shared with ``fit --auto``."""
     p.add_argument('--folds', type=int, default=5, choices=range(2, 21), metavar='K',
-                   help='held-out time blocks (default 5)')
+                   help='validation folds; short time blocks are dealt to them in turn '
+                        '(default 5)')
     p.add_argument('--min-gain', type=fraction, default=0.1, metavar='F',
                    help='least held-out fraction of the residual a supported effect '
                         'removes (default 0.1)')
@@ -36,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``diagnose`` subcommand."""
     p = subparsers.add_parser('diagnose', help='find the physical effect a model is missing',
                               description=__doc__.splitlines()[0])
-    add_common(p)
+    add_common(p, several=True)
     add_diagnose_options(p)
     add_report(p)
     p.set_defaults(func=run)
@@ -46,16 +50,18 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``diagnose``."""
     from motor_comp.workbench import diagnose, open_session
     from motor_comp.workbench import report as rep
-    s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold)
-    d = diagnose(s.kin, s.model, folds=args.folds, min_gain=args.min_gain,
-                 rotary=args.rotary)
+    s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold,
+                     rotary=args.rotary)
+    d = diagnose(list(s.kins), s.model, folds=args.folds, min_gain=args.min_gain)
     text = d.summary()
     data = d.as_dict()
     if args.report:
         out = rep.prepare_dir(args.report)
-        figs = rep.residual_figures(out, s.kin, d.residual, rotary=args.rotary)
+        figs = rep.residual_figures(out, s.kin, d.residual, rotary=d.rotary,
+                                    closed_loop=rep.is_closed_loop(s.run))
         figs.insert(0, rep.candidates_figure(out, d.candidates))
-        page = rep.write_html(out, f'diagnose: {s.kin.name} with {args.model}', text, figs)
+        page = rep.write_html(out, f'diagnose: {", ".join(d.runs)} with {args.model}', text,
+                              figs)
         data['report'] = str(page)
     emit(args, jsonable(data), text)
     if args.report:

@@ -1,11 +1,15 @@
-"""``motor-comp fit RUN --model MODEL.yaml --add EFFECT -o NEW.yaml``: add effects, refit.
+"""``motor-comp fit RUN [RUN2 ...] --model MODEL.yaml [--add EFFECT] [--auto] -o NEW.yaml``.
 
-``--add`` names effects of the vocabulary (repeatable, in order); ``--auto`` repeats
-diagnose → add until no candidate pays for its parameters, printing each step.  All
-parameters that enter linearly (mass, friction levels, ripple amplitudes, …) are refit
-jointly.  Prints the force error before/after (held-out) and the position prediction
-error; writes the model file with ``-o``; ``--json`` prints
-``{steps: [{effect, force_nrmse}], model: {…}, position: {before, after}}``.
+Without ``--add``/``--auto``: every parameter of the model refitted jointly.
+``--add`` names effects of the vocabulary (repeatable, in order); ``--auto`` is
+stepwise selection from the model as given (``effects: {}`` and a rough mass are a
+fine start): add the effect with the best held-out gain while it pays for its
+parameters, and after each addition remove any effect that no longer pays.  Several
+runs are one experiment: one model fitted on all.  Prints each step, the parameters
+with standard errors, the pairs the run cannot separate, the force error before/after
+(held-out) and the position prediction error; writes the model file with ``-o``;
+``--json`` prints ``{steps: [{effect, action, force_nrmse}], model: {…}, uncertainty,
+identifiability, experiment, position: {before, after}}``.
 """
 from __future__ import annotations
 
@@ -23,7 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from motor_comp.physics.effects import VOCABULARY
     p = subparsers.add_parser('fit', help='add effects to a model and refit it on a run',
                               description=__doc__.splitlines()[0])
-    add_common(p)
+    add_common(p, several=True)
     add_diagnose_options(p)
     p.add_argument('--add', action='append', default=[], metavar='EFFECT',
                    choices=list(VOCABULARY) + ['mass'],
@@ -39,21 +43,26 @@ def run(args: argparse.Namespace) -> int:
     from motor_comp.workbench import fit, open_session, predict
     if args.output:     # fail before the fit, not after it
         check_output_file(args.output, '-o')
-    s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold)
+    s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold,
+                     rotary=args.rotary)
 
     def say(msg: str) -> None:
         # progress goes to stderr with --json so stdout holds exactly one object
         print(msg, file=sys.stderr if args.json else sys.stdout)
-    result = fit(s.kin, s.model, add=args.add, auto=args.auto, folds=args.folds,
-                 min_gain=args.min_gain, progress=say, rotary=args.rotary)
+    result = fit(list(s.kins), s.model, add=args.add, auto=args.auto, folds=args.folds,
+                 min_gain=args.min_gain, progress=say)
     before = predict(s.kin, s.model)
     after = predict(s.kin, result.model)
     first, last = result.steps[0], result.steps[-1]
-    unit, k = ('mrad', 1e3) if args.rotary else ('µm', 1e6)
+    rotary = s.model.units.rotary
+    unit, k = ('mrad', 1e3) if rotary else ('µm', 1e6)
     lines = [f'force NRMSE: before {100 * first.force_nrmse:.1f} %, after '
-             f'{100 * last.force_nrmse:.1f} % (held-out)',
-             f'position, {1e3 * before.horizon:.0f} ms-ahead prediction RMS error: before '
-             f'{k * before.rms_error:.2f} {unit}, after {k * after.rms_error:.2f} {unit}']
+             f'{100 * last.force_nrmse:.1f} % (held-out)']
+    lines += [f'cannot tell apart: {n}' for n in result.identifiability]
+    lines += [f'experiment: {n}' for n in result.experiment]
+    lines.append(f'position, {1e3 * before.horizon:.0f} ms-ahead prediction RMS error '
+                 f'({s.kin.name}): before {k * before.rms_error:.2f} {unit}, after '
+                 f'{k * after.rms_error:.2f} {unit}')
     if args.output:
         try:
             result.model.save(args.output)

@@ -28,6 +28,8 @@ SUBCOMMANDS: tuple[str, ...] = (
     'compare',
     'diagnose',
     'fit',
+    'export_table',
+    'study',
 )
 
 DESCRIPTION = ('Precision servo axes: simulate with friction, GMS pre-sliding and force '
@@ -56,7 +58,7 @@ def _command_module(argv: Sequence[str]) -> str | None:
     """Return the module of the subcommand ``argv`` starts with (None, e.g. for --help)."""
     if argv:
         for name in SUBCOMMANDS:
-            if argv[0] in (name, name.removesuffix('_cmd')):
+            if argv[0] in (name, name.removesuffix('_cmd'), name.replace('_', '-')):
                 return name
     return None
 

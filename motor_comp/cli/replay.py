@@ -187,6 +187,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``motor-comp replay``."""
+    from motor_comp.cli.run import require_ros
+    require_ros('motor-comp replay')
     if args.startup_delay < 0 or args.wait_for_subscribers < 0:
         raise ParameterError('--startup-delay and --wait-for-subscribers must be >= 0')
     counts = replay(args.run, rate=args.rate, wait_for_subscribers=args.wait_for_subscribers,

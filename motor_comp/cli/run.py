@@ -42,9 +42,81 @@ class NodeProcessError(MotorCompError):
     """A node process failed (bad parameter, crash, timeout)."""
 
 
+#: ROS_DOMAIN_IDs handed out by :func:`private_domain_id` (above the 20–89 that people
+#: pick by hand here; ≤ 230 keeps Fast DDS's ports 7400 + 250·id + offsets below 65536)
+DOMAIN_RANGE = (100, 230)
+#: where the per-domain lock files live (one ``fcntl`` lock per domain id)
+DOMAIN_LOCK_DIR = Path(tempfile.gettempdir())
+_domain_locks: dict[int, int] = {}
+
+
 def private_domain_id() -> int:
-    """Pick a ROS_DOMAIN_ID in 1..101 derived from the pid and a counter (parallel runs differ)."""
-    return 1 + (os.getpid() * 7 + next(_counter)) % 101
+    """Reserve a ROS_DOMAIN_ID no other process on this machine holds; return it.
+
+    A pid-derived guess collides when several test runs, benches or ``motor-comp run``
+    go at once (two loops on one domain cross-talk: the lockstep plant answers the
+    other loop's commands).  Each id in :data:`DOMAIN_RANGE` has a lock file
+    ``motor_comp_domain_<id>.lock`` in :data:`DOMAIN_LOCK_DIR`; the first id whose
+    ``flock`` this process gets is held until :func:`release_domain_id` or process exit
+    (the kernel drops the lock with the process, so a crash never leaks an id).
+    Raises :class:`NodeProcessError` when every id is taken.
+    """
+    import fcntl
+    low, high = DOMAIN_RANGE
+    span = high - low + 1
+    start = (os.getpid() * 7 + next(_counter)) % span   # spread the first tries
+    for i in range(span):
+        dom = low + (start + i) % span
+        if dom in _domain_locks:
+            continue
+        path = DOMAIN_LOCK_DIR / f'motor_comp_domain_{dom}.lock'
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue
+        _domain_locks[dom] = fd
+        return dom
+    raise NodeProcessError(f'no free ROS_DOMAIN_ID in {low}..{high}: every one is held by '
+                           f'another process (lock files in {DOMAIN_LOCK_DIR})')
+
+
+def release_domain_id(domain_id: int) -> None:
+    """Give back a domain id reserved by :func:`private_domain_id` (no-op otherwise)."""
+    fd = _domain_locks.pop(domain_id, None)
+    if fd is not None:
+        os.close(fd)   # closing the descriptor releases the flock
+
+
+#: what the node processes import: rclpy and the message packages of DESIGN.md §5
+ROS_MODULES = ('rclpy', 'rclpy.lifecycle', 'rcl_interfaces.msg', 'lifecycle_msgs.msg',
+               'std_msgs.msg', 'sensor_msgs.msg', 'rosgraph_msgs.msg')
+
+
+def require_ros(command: str) -> None:
+    """Raise a one-line :class:`MotorCompError` if ROS 2 (rclpy + messages) is missing.
+
+    Called before anything starts: without it the failure shows up as a node
+    process's traceback fragment (``No module named 'rcl_interfaces'``) after the other
+    nodes were already started.  The message names what is missing and both ways to
+    get it.
+    """
+    import importlib
+    missing = []
+    for name in ROS_MODULES:
+        try:
+            importlib.import_module(name)
+        except ImportError as exc:   # also a broken install (a native library missing)
+            top = getattr(exc, 'name', None) or name
+            top = top.split('.')[0]
+            if top not in missing:
+                missing.append(top)
+    if missing:
+        raise MotorCompError(
+            f'{command} needs ROS 2 Jazzy, which is not installed here (missing: '
+            f"{', '.join(missing)}): install the ROS wheels with `pip install -e '.[ros]'`, "
+            f'or source a ROS 2 Jazzy setup (`source /opt/ros/jazzy/setup.bash`)')
 
 
 def ros_environment(domain_id: int | None = None) -> dict[str, str]:
@@ -221,6 +293,7 @@ def run_nodes(spec: RunSpec, *, workdir: Path | None = None, timeout: float | No
     Raises :class:`NodeProcessError` (one line, with the failing node's last output)
     if a node exits early or the run does not finish within ``timeout`` seconds.
     """
+    require_ros('running the ROS 2 nodes')
     # the recorder would only fail after every node has started: check the path first
     out = check_output_file(spec.output, '-o')
     if timeout is None:
@@ -317,6 +390,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``motor-comp run``."""
+    require_ros('motor-comp run')
     if not args.duration > 0:
         raise ParameterError(f'--duration must be > 0, got {args.duration:g}')
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:

@@ -2,9 +2,11 @@
 
 Prints the tracking-error table, or with ``--json`` one object
 ``{"runs": [{rms_error, max_error, max_glitch, mean_glitch, glitches: [{t, magnitude}],
-…}]}`` (DESIGN.md §6); ``-o RUN.mcap`` records the run (DESIGN.md §5 topics) with the
-run parameters as MCAP metadata.  Heavy modules (MCAP writer, plots) load lazily so a
-short command starts fast.
+…}]}`` (DESIGN.md §6); ``--compensation MODEL.yaml`` adds the model's effects as a
+feedforward at the reference state (``--compensation-table TABLE.csv`` a position
+table, :mod:`motor_comp.control.compensation`); ``-o RUN.mcap`` records the run
+(DESIGN.md §5 topics) with the run parameters as MCAP metadata.  Heavy modules (MCAP
+writer, plots) load lazily so a short command starts fast.
 """
 from __future__ import annotations
 
@@ -51,8 +53,30 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help='quadrant-glitch window W [s] (default 0.2)')
     p.add_argument('-o', '--output', metavar='RUN.mcap', help='record the run to MCAP')
     p.add_argument('--name', default=None, help='run name (default: output stem)')
+    add_compensation_arguments(p)
     add_json(p)
     p.set_defaults(func=run)
+
+
+def add_compensation_arguments(p: argparse.ArgumentParser) -> None:
+    """``--compensation MODEL.yaml`` | ``--compensation-table TABLE.csv``."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument('--compensation', metavar='MODEL.yaml',
+                   help="feedforward of this model file's effects at the reference state "
+                        '(friction, GMS, ripple, offset, spring, gravity) in any controller')
+    g.add_argument('--compensation-table', metavar='TABLE.csv',
+                   help='position-dependent compensation table (motor-comp export-table), '
+                        'interpolated')
+
+
+def compensation_from_args(args: argparse.Namespace) -> Any:
+    """Load the compensation the options name (None without one); one-line errors."""
+    from motor_comp.control import compensation
+    if getattr(args, 'compensation', None):
+        return compensation.load_model(args.compensation)
+    if getattr(args, 'compensation_table', None):
+        return compensation.load_table(args.compensation_table)
+    return None
 
 
 def scenario_from_args(args: argparse.Namespace) -> Any:
@@ -62,6 +86,23 @@ def scenario_from_args(args: argparse.Namespace) -> Any:
     return Scenario(plant=args.plant, controller=args.controller,
                     feedforward=args.feedforward, duration=args.duration, seed=args.seed,
                     trajectory=args.trajectory, settings=settings)
+
+
+def run_scenario(scenario: Any, comp: Any, *, engine: str = 'jit') -> tuple[Any, Any]:
+    """``scenario.run`` with the compensation ``comp`` (or None) loaded in the controller."""
+    import dataclasses
+
+    from motor_comp.control.simulator import simulate
+    if comp is None:
+        return scenario.run(engine=engine)
+    true, _nominal, ctrl, traj, load = scenario.build()
+    ctrl.set_compensation(comp)
+    res = simulate(true, ctrl, traj, duration=scenario.duration, seed=scenario.seed,
+                   load=load, engine=engine)
+    meta = dict(res.metadata)
+    meta['settings'] = {k: v for k, v in scenario.settings}
+    meta['plant'] = scenario.plant
+    return dataclasses.replace(res, metadata=meta), ctrl
 
 
 def run_metadata(scenario: Any, ctrl: Any, result: Any) -> dict[str, str]:
@@ -77,6 +118,8 @@ def run_metadata(scenario: Any, ctrl: Any, result: Any) -> dict[str, str]:
             'generator': 'motor-comp simulate'}
     if scenario.controller == 'adaptive_sliding':
         meta['final_estimates'] = json.dumps(ctrl.estimates)
+    if ctrl.compensation is not None:
+        meta['compensation'] = json.dumps(ctrl.compensation.describe())
     return meta
 
 
@@ -90,8 +133,9 @@ def run(args: argparse.Namespace) -> int:
     scenario = scenario_from_args(args)
     if args.output:
         check_output_file(args.output, '-o')  # fail now, not after the simulation
+    comp = compensation_from_args(args)
     t0 = time.perf_counter()
-    result, ctrl = scenario.run(engine=args.engine)
+    result, ctrl = run_scenario(scenario, comp, engine=args.engine)
     wall = time.perf_counter() - t0
     name = args.name or (Path(args.output).stem if args.output else
                          f'{scenario.plant}-{scenario.controller}-{scenario.feedforward}')
@@ -113,6 +157,8 @@ def run(args: argparse.Namespace) -> int:
     if scenario.controller == 'adaptive_sliding':
         entry['estimates'] = ctrl.estimates
         entry['nominal'] = ctrl.nominal
+    if comp is not None:
+        entry.update(comp.describe())
     if args.output:
         entry['path'] = str(args.output)
     if args.json:
@@ -123,6 +169,8 @@ def run(args: argparse.Namespace) -> int:
           f'({scenario.duration / max(wall, 1e-9):.0f}× real time)')
     print(f'  rms error   {metrics.rms_error * um:10.3f} µm')
     print(f'  max error   {metrics.max_error * um:10.3f} µm')
+    if comp is not None:
+        print(f'  {comp.summary()}')
     if metrics.max_glitch is not None:
         print(f'  glitches    {len(metrics.glitches):10d}   max {metrics.max_glitch * um:.3f} µm'
               f'   mean {metrics.mean_glitch * um:.3f} µm')

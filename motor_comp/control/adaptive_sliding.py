@@ -42,8 +42,10 @@ and the update laws (Tan eq. 18–24)::
 give ``V̇ = −K·s·s_Δ − (k* − d·sgn s)·|s_Δ| <= −K·s_Δ² <= 0`` since ``s·s_Δ >= s_Δ²``;
 Barbalat's lemma then gives ``s_Δ → 0``: the error enters the boundary layer.
 
-Bounded laws: each estimate is projected onto a box ``[lo_i, hi_i]`` containing the
-truth (``hi = bound_factor·max(|nominal|, floor)``); projection only removes update
+Bounded laws: each estimate is projected onto a box ``[lo_i, hi_i]`` built around the
+nominal model, ``hi = bound_factor·max(|nominal|, floor)``, which contains the truth when
+the nominal is at least 1/bound_factor of it or the floor covers it (the floors admit
+a nominally absent effect: a zero nominal, Tan's experiment); projection only removes update
 components that point out of the box, where ``θ̃_i·θ̂̇_i`` would have been negative
 anyway, so it never increases ``V̇``.
 
@@ -55,9 +57,10 @@ and stiction does not give, and each broken assumption has its own remedy:
 
 1. *Balance condition* (Slotine & Li 1991, §7.2.3, the boundary layer follows the
    gain).  Inside the layer the robust term is a gain ``k̂/φ`` on ``s``, added to ``K``;
-   the sampled PID part keeps no phase margin at 1.67·K, and with φ = 0.2 mm/s a k̂ of
-   10 N is 11·K: a limit cycle in the layer whose amplitude grows with k̂ (estimates
-   exact and frozen, k̂ held at 30 N: ≈ 4 000 sign changes per 30 s of dwell).  The
+   the sampled PID part (GM 8.4 dB on the exact sampled loop) keeps no margin at 2.6·K,
+   and with φ = 0.2 mm/s a k̂ of 10 N is 11·K: a limit cycle in the layer whose
+   amplitude grows with k̂ (estimates exact and frozen, k̂ held at 30 N: ≈ 4 000 sign
+   changes per 30 s of dwell).  The
    layer widens instead, ``φ_k = max(φ, k̂/K_φ)``, ``K_φ = layer_gain·K``.
 2. *Dead zones* sized to the measurement noise of ``s`` (Peterson & Narendra 1982;
    :func:`noise_levels`).  ``k̂̇ = γ_k·|s_Δ|`` rectifies noise, so it grows without end
@@ -74,7 +77,8 @@ and stiction does not give, and each broken assumption has its own remedy:
    the laws integrated the integrator's holding force (legacy law, 10–30 s: B̂1 moved
    +46 N in the dwells and −39 N in the moves, k̂ grew in every dwell).
 4. *σ-modification* (Ioannou & Kokotović 1983; Ioannou & Sun 1996, §8.4) towards the
-   nominal θ0 of the plant file, ``−σ·(θ̂ − θ0)``, not on k̂.  Regressors ẋ and ẋ_d are
+   controller's nominal θ0 (:mod:`.nominal`, never the truth), ``−σ·(θ̂ − θ0)``, not
+   on k̂.  Regressors ẋ and ẋ_d are
    nearly collinear (back-EMF vs viscous), ẍ_r is excited only during accelerations,
    and the Stribeck part of ``d`` correlates with ``sgn ẋ_d``: without leakage fĉ
    creeps to 17–20 N in 10 min and its step at every stop makes the axis stick-slip in
@@ -151,8 +155,9 @@ class AdaptiveParams(ParamsBase):
     gamma_fv: float = spec(1e4, '-', 'adaptation rate γ of fv/g', 0.0, 1e12)
     gamma_ripple: float = spec(1000.0, '-', 'adaptation rate γ of A1/g and B1/g', 0.0, 1e12)
     gamma_k: float = spec(20.0, '-', 'growth rate γ_k of the robust gain k̂', 0.0, 1e12)
-    initial_fraction: float = spec(0.5, '-', 'initial estimates as a fraction of nominal',
-                                   0.0, 2.0)
+    initial_fraction: float = spec(1.0, '-', 'initial estimates as a fraction of the nominal '
+                                   'model (which is itself 50 % or 0 of the truth, '
+                                   ':mod:`.nominal`)', 0.0, 2.0)
     bound_factor: float = spec(3.0, '-', 'projection box: |θ̂| <= factor·max(|nominal|, floor)',
                                1.0, 100.0)
     ripple_period: float = spec(0.0, 'm', 'ripple period of the regressor; 0 = from plant',
@@ -174,9 +179,14 @@ class AdaptiveParams(ParamsBase):
 
 
 def nominal_theta(model: AxisModel, *, ripple_period: float = 0.0) -> tuple[np.ndarray, float]:
-    """Return the true parameters in volts ``[θ1, θ2, fc/g, fv/g, A1/g, B1/g, k*]`` and ω.
+    """Return the parameters of ``model`` in volts ``[θ1, θ2, fc/g, fv/g, A1/g, B1/g, k*]`` and ω.
 
-    ``k*`` is the Stribeck excess ``fs − fc`` in volts (what the robust term must cover).
+    ``model`` is the controller's *nominal* model (:mod:`.nominal`), so this is what the
+    controller believes, never the truth: the initial estimates, the σ-leakage target θ0
+    and the projection box are built from it.  ``k*`` is the Stribeck excess ``fs − fc``
+    in volts (what the robust term must cover).  ω [rad/m] comes from ``ripple_period``
+    [m] if given, else from the nominal ripple period (the magnet pitch, which a user
+    knows), else 0.02 m.
     """
     g = model.input_gain
     fc, fs, _, _ = model.stribeck_curve_params()

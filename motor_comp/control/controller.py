@@ -27,6 +27,8 @@ from numba import njit
 from motor_comp.control._jitcache import JIT_INLINE
 from motor_comp.control.adaptive_sliding import ESTIMATES, N_THETA, AdaptiveParams, \
     Robustness, adaptive_output, estimates_in_units, nominal_theta, projection_box, robustness
+from motor_comp.control.compensation import CS_F, CS_SIZE, CS_U, Compensation, \
+    compensation_command
 from motor_comp.control.feedforward import Feedforward, friction_feedforward
 from motor_comp.control.npid import NPIDParams, npid_gain, popov_limit, sampled_loop
 from motor_comp.control.params import ParamsBase
@@ -76,8 +78,9 @@ Q_FC, Q_FS, Q_VS, Q_DELTA, Q_FV = Q_GAIN + 1, Q_GAIN + 2, Q_GAIN + 3, Q_GAIN + 4
 Q_GMS_N, Q_GMS_C = Q_GAIN + 6, Q_GAIN + 7
 Q_GMS_ALPHA = Q_GAIN + 8
 Q_GMS_K = Q_GMS_ALPHA + MAX_ELEMENTS
+Q_GMS_SIGMA = Q_GMS_K + MAX_ELEMENTS      # GMS micro-damping [N·s/m]; Q_GMS_C is C [N/s]
 # robustness of the adaptive laws (dead zone, layer slope, rest speed, leakage, targets)
-Q_EPS_TH = Q_GMS_K + MAX_ELEMENTS
+Q_EPS_TH = Q_GMS_SIGMA + MAX_ELEMENTS
 Q_EPS_K, Q_KLAYER, Q_VREST, Q_SIGMA = Q_EPS_TH + 1, Q_EPS_TH + 2, Q_EPS_TH + 3, Q_EPS_TH + 4
 Q_TH0 = Q_EPS_TH + 5
 Q_SIZE = Q_TH0 + N_THETA
@@ -142,10 +145,11 @@ def controller_step(Q, C, r, rv, ra, y, vy, dt):
     C[C_RVL] = rv
     f_ff, f_static, f_gms = friction_feedforward(
         int(Q[Q_FF]), rv, dx, dt, Q[Q_FC], Q[Q_FS], Q[Q_VS], Q[Q_DELTA], Q[Q_FV],
-        C, C_GMS_F, C_GMS_SLIP, Q, Q_GMS_ALPHA, Q_GMS_K, n, Q[Q_GMS_C])
+        C, C_GMS_F, C_GMS_SLIP, Q, Q_GMS_ALPHA, Q_GMS_K, Q_GMS_SIGMA, n, Q[Q_GMS_C])
     C[C_FSTAT] = f_static
     C[C_FGMS] = f_gms
-    u_ff = f_ff / Q[Q_GAIN]
+    # model-based compensation (a block after Q_SIZE / C_SIZE, when one is loaded)
+    u_ff = f_ff / Q[Q_GAIN] + compensation_command(Q, Q_SIZE, C, C_SIZE, r, rv, dx, dt)
     u_fb, s = feedback(Q, C, e, ed, integ, ra, rv, y, dt, Q[Q_ADAPT] > 0.5)
     C[C_S] = s
     C[C_RAL] = ra
@@ -185,6 +189,7 @@ class Controller:
                                  f'(GMS) effect in the nominal model {plant.source!r}')
         self.state = np.zeros(C_SIZE)
         self.packed = np.zeros(Q_SIZE)
+        self._comp: Compensation | None = None
         self._pack()
         self.reset()
 
@@ -223,10 +228,11 @@ class Controller:
         Q[Q_FC], Q[Q_FS], Q[Q_VS], Q[Q_DELTA], Q[Q_FV] = fc, fs, vs, delta, model.fv
         if self._gms is not None:
             n = len(self._gms.alpha)
-            Q[Q_GMS_N], Q[Q_GMS_C] = n, self._gms.c
+            Q[Q_GMS_N], Q[Q_GMS_C] = n, self._gms.C
             Q[Q_GMS_ALPHA:Q_GMS_ALPHA + n] = self._gms.alpha
             Q[Q_GMS_K:Q_GMS_K + n] = self._gms.k
-        self.packed[:] = Q
+            Q[Q_GMS_SIGMA:Q_GMS_SIGMA + n] = self._gms.sigma
+        self.packed[:Q_SIZE] = Q
 
     @property
     def robustness(self) -> Robustness:
@@ -237,12 +243,17 @@ class Controller:
                           noise_std=sens.noise_std, control_period=1.0 / self.plant.control_rate)
 
     def popov_limit(self) -> float:
-        """Popov bound of k(e) for the sampled loop of the nominal plant (Chiew eq. 9)."""
+        """Popov (Tsypkin) bound of k(e) for the sampled loop of the nominal plant.
+
+        Chiew eq. 9 on the loop as implemented: ZOH, dead time, discrete PID at the
+        control rate (:func:`~motor_comp.control.npid.sampled_loop`).
+        """
         p = self._params.get(ControlMode.NPID, NPIDParams())
         dly = self.plant.model.get('delay')
+        T = 1.0 / self.plant.control_rate
         w, L = sampled_loop(self.plant.model, p, delay=dly.tau if dly else 0.0,
-                            control_period=1.0 / self.plant.control_rate)
-        return max(1.0, popov_limit(L, w))
+                            control_period=T)
+        return max(1.0, popov_limit(L, w, control_period=T))
 
     # -- the step ------------------------------------------------------------------
     def step(self, ref_pos: float, ref_vel: float, ref_acc: float, meas_pos: float,
@@ -281,7 +292,10 @@ class Controller:
         settle it.
         """
         Q, C = self.packed, self.state
-        coef = {ControlMode.PID: Q[Q_KI], ControlMode.NPID: Q[Q_KI],
+        # slope of the output in the integral: N-PID scales its PID by k(e) (up to
+        # k_max ≈ 2.6: a secant step with slope Ki alone would diverge)
+        k_e = npid_gain(C[C_E], Q[Q_K0], Q[Q_EMAX], Q[Q_KMAX])
+        coef = {ControlMode.PID: Q[Q_KI], ControlMode.NPID: Q[Q_KI] * k_e,
                 ControlMode.ADAPTIVE_SLIDING: Q[Q_KS] * Q[Q_LAM2]}[self._mode]
         if coef <= 0.0 or not math.isfinite(target):
             return
@@ -309,6 +323,9 @@ class Controller:
         if ff & Feedforward.GMS and self._gms is None:
             raise ParameterError(f'feedforward {ff.label!r} needs a presliding (GMS) effect '
                                  f'in the nominal model')
+        if ff is not Feedforward.NONE and self._comp is not None and self._comp.has_friction:
+            raise ParameterError(f'the compensation {self._comp.source} already cancels '
+                                 f'friction; feedforward {ff.label!r} would count it twice')
         u_last, started = self.state[C_U], self.state[C_INIT] > 0
         self._ff = ff
         self._pack()
@@ -318,6 +335,8 @@ class Controller:
                  Feedforward.STATIC_GMS: self.state[C_FGMS]
                  + self.plant.model.fv * self.state[C_RVL]}[ff]
             self.state[C_UFF] = f / self.plant.model.input_gain
+            if self.state.shape[0] > C_SIZE:   # the compensation's share stays
+                self.state[C_UFF] += self.state[C_SIZE + CS_U]
             self._rebalance(u_last)
 
     def update(self, *, mode: 'str | ControlMode | None' = None, **params: Any) -> None:
@@ -342,7 +361,7 @@ class Controller:
 
     @property
     def nominal(self) -> dict[str, float]:
-        """Nominal (plant-config) values of :attr:`estimates`, same units."""
+        """The nominal model's values of :attr:`estimates` (what the law was built from)."""
         theta, _ = nominal_theta(self.plant.model)
         return estimates_in_units(theta, self.plant.model.input_gain)
 
@@ -360,10 +379,56 @@ class Controller:
         self.state[:] = 0.0
         self._reset_estimates()
 
+    # -- model-based compensation (motor_comp.control.compensation) ------------------
+    @property
+    def compensation(self) -> Compensation | None:
+        """The loaded compensation, or None."""
+        return self._comp
+
+    def set_compensation(self, comp: Compensation | None) -> None:
+        """Load (or with None remove) a compensation; bumpless while running.
+
+        Its friction would be counted twice with the friction feedforward, so a
+        compensation that cancels friction needs ``feedforward`` ``none``
+        (:class:`ParameterError` otherwise, nothing changed).  While running, the
+        integrator is re-balanced so the command does not jump: the new feedforward,
+        evaluated at the last reference, replaces what the integral held.
+        """
+        if comp is not None and comp.has_friction and self._ff is not Feedforward.NONE:
+            raise ParameterError(
+                f'{comp.source} compensates friction ({", ".join(comp.compensated)}); '
+                f'with feedforward {self._ff.label!r} it would be counted twice: set '
+                f'feedforward none')
+        Q, C = self.packed, self.state
+        started = C[C_INIT] > 0
+        u_last = C[C_U]
+        u_old = C[C_SIZE + CS_U] if C.shape[0] > C_SIZE else 0.0
+        block = comp.packed if comp is not None else np.zeros(0)
+        state = np.zeros(C_SIZE + (CS_SIZE if comp is not None else 0))
+        state[:C_SIZE] = C[:C_SIZE]
+        packed = np.concatenate([Q[:Q_SIZE], block])
+        u_new = 0.0
+        if comp is not None and started:
+            # the new block at the last reference (GMS elements relaxed: dx = 0)
+            u_new = compensation_command(packed, Q_SIZE, state, C_SIZE, C[C_RPREV],
+                                         C[C_RVL], 0.0, C[C_DTL])
+        self.packed, self.state, self._comp = packed, state, comp
+        if started:
+            state[C_UFF] += u_new - u_old
+            self._rebalance(u_last)
+
+    @property
+    def compensation_force(self) -> float:
+        """Force [N] the compensation added at the last step (0 without one)."""
+        return float(self.state[C_SIZE + CS_F]) if self.state.shape[0] > C_SIZE else 0.0
+
     def describe(self) -> dict[str, Any]:
         """Mode, feedforward and parameters as plain values (run metadata)."""
-        return {'controller': self._mode.label, 'feedforward': self._ff.label,
-                **{k: v for k, v in self.params.as_dict().items()}}
+        out = {'controller': self._mode.label, 'feedforward': self._ff.label,
+               **{k: v for k, v in self.params.as_dict().items()}}
+        if self._comp is not None:
+            out.update(self._comp.describe())
+        return out
 
 
 def default_params(mode: ControlMode, plant: PlantConfig) -> ParamsBase:

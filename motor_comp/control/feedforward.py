@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import enum
 
-import numpy as np
 from numba import njit
 
 from motor_comp.control._jitcache import JIT_INLINE
@@ -69,7 +68,7 @@ def static_feedforward(v, fc, fs, vs, delta, fv):
 
 @njit(**JIT_INLINE)
 def friction_feedforward(mode, v, dx, dt, fc, fs, vs, delta, fv, st, i_f, i_s, q, i_a, i_k,
-                         n, c):
+                         i_g, n, C):
     """Feedforward friction force [N] for ``mode`` (0 none, 1 static, 2 gms, 3 both).
 
     Returns ``(force of the mode, static-model force, GMS element force)`` [N]; the last
@@ -92,14 +91,15 @@ def friction_feedforward(mode, v, dx, dt, fc, fs, vs, delta, fv, st, i_f, i_s, q
         GMS element state: forces ``st[i_f + i]`` [N] and phases ``st[i_s + i]``
         (updated in place whenever a GMS mode is active, so that a switch to it is
         bumpless).
-    q, i_a, i_k, n, c : ndarray, int, int, int, float
+    q, i_a, i_k, i_g, n, C : ndarray, int, int, int, int, float
         Nominal GMS elements: slip limits ``q[i_a + i]`` [-], stiffnesses ``q[i_k + i]``
-        [N/m], ``i < n``; attraction rate ``c`` [1/s].
+        [N/m], micro-damping ``q[i_g + i]`` [N·s/m], ``i < n``; constant attraction ``C``
+        [N/s] (Lampaert 2003: slip relaxation rate ``C/|s(v)|``).
     """
     f_el = 0.0
     if n > 0:
         s_v = stribeck_curve(v, fc, fs, vs, delta)
-        f_el = gms_step(st, i_f, st, i_s, q, i_a, q, i_k, n, np.exp(-c * dt), dx, v, s_v)
+        f_el = gms_step(st, i_f, st, i_s, q, i_a, q, i_k, q, i_g, n, C, dt, dx, v, s_v)
     f_static = static_feedforward(v, fc, fs, vs, delta, fv)
     if mode == 1:
         return f_static, f_static, f_el

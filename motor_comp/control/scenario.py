@@ -6,9 +6,16 @@ Setting names:
   :class:`~motor_comp.control.params.ParamsBase` fields;
 * ``plant.<effect>.<param>`` (e.g. ``plant.coulomb.fc``) or ``plant.mass`` /
   ``plant.input_gain`` / ``plant.back_emf`` / ``plant.damping`` — the *true* plant only;
-  the controller keeps the nominal model of the plant file (the feedforward and the
-  adaptive initial estimates use the nominal values, as on a real machine);
-* ``nominal.<…>`` — the same for the controller's nominal model;
+  the controller keeps its nominal model (the feedforward and the adaptive initial
+  estimates, leakage target and projection box use the nominal values, as on a real
+  machine).  Ripple harmonics: ``ripple.a1``, ``ripple.b1`` (``a<h>``/``b<h>``) [N];
+* ``nominal.start`` (``half | zero | identified | exact``) and ``nominal.mass_factor``,
+  ``nominal.friction_factor``, ``nominal.ripple_factor``, ``nominal.stiffness_factor`` —
+  how the nominal model is derived from the plant file
+  (:func:`~motor_comp.control.nominal.derive_nominal`; default: PMLM ``half`` = mass
+  +20 %, friction and ripple at 50 %; ball-screw ``identified``); then
+  ``nominal.<effect>.<param>`` / ``nominal.mass`` … set single nominal values (e.g.
+  ``nominal.ripple.period``, ``nominal.ripple.a1``);
 * ``sensors.noise_std`` / ``sensors.encoder_resolution`` / ``sensors.saturation``,
   ``rates.control_hz`` / ``rates.physics_hz`` — both;
 * ``traj.<param>`` (e.g. ``traj.period``; lists as ``a;b;c``) — the trajectory;
@@ -17,9 +24,12 @@ Setting names:
 from __future__ import annotations
 
 import dataclasses
+import re
 from typing import Any, Mapping
 
 from motor_comp.control.controller import Controller, make_controller
+from motor_comp.control.nominal import NominalSpec, NominalStart, default_start, \
+    derive_nominal
 from motor_comp.control.simulator import SimResult, simulate
 from motor_comp.control.trajectories import Trajectory, default_trajectory, make_trajectory
 from motor_comp.errors import ParameterError, check_finite
@@ -28,6 +38,8 @@ from motor_comp.physics.effects import make_effect
 from motor_comp.physics.plant import Sensors, StepLoad
 
 _MODEL_FIELDS = ('mass', 'input_gain', 'back_emf', 'damping')
+_HARMONIC = re.compile(r'([ab])([1-9][0-9]*)$')
+_NOMINAL_FACTORS = tuple(f.name for f in dataclasses.fields(NominalSpec))
 
 
 def parse_value(text: str) -> Any:
@@ -59,7 +71,16 @@ def _override_model(plant: PlantConfig, key: str, value: Any, where: str) -> Pla
                              f'{", ".join(where + "." + f for f in _MODEL_FIELDS)}')
     current = model.get(effect)
     params = current.params() if current is not None else {}
-    params[param] = value
+    harmonic = _HARMONIC.match(param) if effect == 'ripple' else None
+    if harmonic:
+        # one ripple coefficient [N]: ripple.a1 = sine, ripple.b1 = cosine of harmonic 1
+        h = int(harmonic.group(2))
+        pairs = [list(p) for p in params.get('harmonics', [])]
+        pairs += [[0.0, 0.0] for _ in range(h - len(pairs))]
+        pairs[h - 1]['ab'.index(harmonic.group(1))] = check_finite(f'{where}.{key}', value)
+        params['harmonics'] = pairs
+    else:
+        params[param] = value
     try:
         return plant.with_model(model.with_effect(make_effect(effect, params)))
     except ParameterError as exc:
@@ -111,9 +132,21 @@ class Scenario:
     settings: tuple = ()
 
     def build(self) -> tuple[PlantConfig, PlantConfig, Controller, Trajectory, StepLoad]:
-        """Return (true plant, nominal plant, controller, trajectory, load)."""
-        nominal = load_plant(self.plant)
-        true = nominal
+        """Return (true plant, nominal plant, controller, trajectory, load).
+
+        The nominal plant is derived from the plant file by ``nominal.start`` and the
+        ``nominal.*_factor`` settings (:func:`~motor_comp.control.nominal.derive_nominal`),
+        then ``nominal.<effect>.<param>`` settings apply, in order.
+        """
+        true = load_plant(self.plant)
+        start: str | NominalStart = default_start(true.kind)
+        factors: dict[str, Any] = {}
+        for key, value in self.settings:
+            if key == 'nominal.start':
+                start = NominalStart.parse(value)
+            elif key.startswith('nominal.') and key[8:] in _NOMINAL_FACTORS:
+                factors[key[8:]] = value
+        nominal = derive_nominal(true, NominalSpec.preset(start).replace(**factors))
         ctrl_params: dict[str, Any] = {}
         traj_params: dict[str, Any] = {}
         load = {'force': 0.0, 't_start': 0.0}
@@ -122,7 +155,8 @@ class Scenario:
             if dot and group == 'plant':
                 true = _override_model(true, rest, value, 'plant')
             elif dot and group == 'nominal':
-                nominal = _override_model(nominal, rest, value, 'nominal')
+                if rest != 'start' and rest not in _NOMINAL_FACTORS:
+                    nominal = _override_model(nominal, rest, value, 'nominal')
             elif dot and group in ('sensors', 'rates'):
                 true = _override_both(true, key, value)
                 nominal = _override_both(nominal, key, value)
@@ -151,6 +185,7 @@ class Scenario:
         meta = dict(res.metadata)
         meta['settings'] = {k: v for k, v in self.settings}
         meta['plant'] = self.plant
+        meta['nominal'] = nominal.source
         return dataclasses.replace(res, metadata=meta), ctrl
 
     @classmethod

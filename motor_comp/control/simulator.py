@@ -6,7 +6,9 @@ The loop composes the three step kernels the ROS nodes call one by one
 :func:`~motor_comp.physics.kernel.plant_measure` /
 :func:`~motor_comp.physics.kernel.plant_advance`).  ``engine='python'`` steps the Python
 wrappers the nodes use (``trajectory.at``, ``Plant.measure``, ``Controller.step``,
-``Plant.step``) and gives identical numbers.
+``Plant.step``) and gives identical numbers.  A model-based compensation
+(:mod:`motor_comp.control.compensation`) travels inside the controller's packed vectors,
+so both engines run it with no change here.
 """
 from __future__ import annotations
 

@@ -108,6 +108,58 @@ class _Unbuffered:
         self._raw.close()
 
 
+class _PackedChunkIndex:
+    """The mcap writer's chunk index, kept as serialized records in a temporary file.
+
+    The writer keeps one ``ChunkIndex`` object (a dataclass and a dict of per-channel
+    offsets, ≈ 0.6 KiB of Python heap) per chunk until it writes the summary: for a
+    recorder closing a 256 KiB chunk every ≈ 0.7 s of 1 kHz lockstep, ≈ 3–5 MiB per
+    hour of recording, growing with the run.  Here each index is serialized at once
+    into the ≈ 120-byte record the summary will hold and appended to an unnamed
+    temporary file (same bytes, in the same order), read back once when the summary is
+    written: the recorder's memory no longer grows with the number of chunks.  Only
+    ``append`` and iteration are used by ``mcap.writer.Writer``.
+    """
+
+    def __init__(self) -> None:
+        import tempfile
+
+        from mcap.data_stream import RecordBuilder
+        self._builder = RecordBuilder()
+        self._spill = tempfile.TemporaryFile(prefix='motor_comp_chunk_index_')
+        self._count = 0
+
+    def append(self, index: Any) -> None:
+        """Serialize ``index`` (an ``mcap.records.ChunkIndex``); keep only its bytes, on disk."""
+        index.write(self._builder)
+        self._spill.write(self._builder.end())
+        self._count += 1
+
+    def __len__(self) -> int:
+        return self._count
+
+    def __iter__(self) -> Iterator[Any]:
+        self._spill.seek(0)
+        data = self._spill.read()
+        self._spill.seek(0, os.SEEK_END)
+        yield _RawRecords(data)
+
+    def close(self) -> None:
+        """Delete the temporary file."""
+        self._spill.close()
+
+
+class _RawRecords:
+    """Already-serialized summary records, written as they are."""
+
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+
+    def write(self, stream: Any) -> None:
+        """Append the records to the summary being built."""
+        stream.write(self.data)
+
+
 def _str_metadata(data: Mapping[str, Any]) -> dict[str, str]:
     return {str(k): v if isinstance(v, str) else json.dumps(v, default=str)
             for k, v in data.items()}
@@ -146,6 +198,10 @@ class McapRecorder:
             raise InputFileError(f'{self.path}: cannot write ({exc.strerror})') from None
         self._writer = Writer(self._file, chunk_size=int(chunk_size),
                               compression=_compression(compression))
+        # memory flat over long recordings (see _PackedChunkIndex); the attribute is the
+        # writer's private list, so only where this mcap version has it
+        if isinstance(getattr(self._writer, '_Writer__chunk_indices', None), list):
+            self._writer._Writer__chunk_indices = _PackedChunkIndex()
         self._writer.start(profile='ros2', library=_library())
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
@@ -225,6 +281,10 @@ class McapRecorder:
             self._writer.finish()
         finally:
             self._file.close()
+            close_index = getattr(getattr(self._writer, '_Writer__chunk_indices', None),
+                                  'close', None)
+            if close_index is not None:   # the spilled chunk index (_PackedChunkIndex)
+                close_index()
 
 
 def write_run(path: str | os.PathLike, run: Run, *, metadata: Mapping[str, Any] | None = None,
@@ -781,6 +841,63 @@ def _clean(path: Path, topic: str, field: str, t: np.ndarray, v: np.ndarray,
     return t, v
 
 
+def _prepare(path: str | os.PathLike, namespace: str, signals: Collection[str] | None,
+             require: Collection[str]
+             ) -> tuple[Path, int, Mapping[str, str], dict[str, tuple[str, frozenset[str]]]]:
+    """Check the file and the wanted signals; return (file, size, topic names, wanted)."""
+    path = Path(path)
+    if not path.exists():
+        raise InputFileError(f'{path}: no such file')
+    if path.is_dir():                  # a rosbag2 directory holding one MCAP file
+        files = sorted(path.glob('*.mcap'))
+        if len(files) != 1:
+            raise InputFileError(f'{path}: a directory with {len(files)} .mcap files; '
+                                 'pass one MCAP file')
+        path = files[0]
+    if not path.is_file():
+        raise InputFileError(f'{path}: not a file')
+    size = path.stat().st_size
+    if size == 0:
+        raise InputFileError(f'{path}: empty file')
+    if size < 8:
+        raise InputFileError(f'{path}: not an MCAP file (only {size} bytes)')
+    names = schemas.topics(namespace)
+    keep = set(Run.SIGNALS) if signals is None else set(signals) | {'position'}
+    keep |= set(require)
+    unknown = keep - set(Run.SIGNALS)
+    if unknown:
+        raise ParameterError(f'signals: unknown {sorted(unknown)}; choose from {Run.SIGNALS}')
+    wanted = {names['joint_states']: ('joint', frozenset(
+        f for f in ('velocity', 'effort') if f not in keep))}
+    if keep & {'reference', 'reference_velocity'}:
+        wanted[names['reference']] = ('joint', frozenset(
+            {'effort'} | ({'position'} if 'reference' not in keep else set())
+            | ({'velocity'} if 'reference_velocity' not in keep else set())))
+    if 'voltage' in keep:
+        wanted[names['voltage']] = ('scalar', frozenset())
+    return path, size, names, wanted
+
+
+def joint_states_of(path: Path, reader: Any, names: Mapping[str, str], damage: Any) -> Any:
+    """Warn about undecodable messages; return the joint-state topic or raise one line.
+
+    Shared by :func:`read_run` and the streaming reader of
+    :mod:`motor_comp.analysis.streaming` (same checks, same wording).
+    """
+    for tp in reader.topics.values():
+        if tp.corrupt:
+            warn(f'{path.name}: {tp.topic}: skipped {tp.corrupt} undecodable messages')
+    js = reader.topics.get(names['joint_states'])
+    if js is None or js.count() == 0:
+        if damage is not None and reader.messages == 0:
+            raise InputFileError(f'{path}: corrupt or truncated at byte {damage.offset} '
+                                 f'({damage.reason}); no messages could be read')
+        found = ', '.join(sorted(reader.all_topics)) or 'none'
+        raise InputFileError(f'{path}: no {names["joint_states"]} messages '
+                             f'(topics in file: {found})')
+    return js
+
+
 def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str = 'axis',
              joint: str = 'axis', signals: Collection[str] | None = None,
              require: Collection[str] | Mapping[str, str] = ()) -> Run:
@@ -818,36 +935,7 @@ def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str 
         Missing, empty, non-MCAP or unreadable file, no joint-state samples, or a
         required signal is absent.
     """
-    path = Path(path)
-    if not path.exists():
-        raise InputFileError(f'{path}: no such file')
-    if path.is_dir():                  # a rosbag2 directory holding one MCAP file
-        files = sorted(path.glob('*.mcap'))
-        if len(files) != 1:
-            raise InputFileError(f'{path}: a directory with {len(files)} .mcap files; '
-                                 'pass one MCAP file')
-        path = files[0]
-    if not path.is_file():
-        raise InputFileError(f'{path}: not a file')
-    size = path.stat().st_size
-    if size == 0:
-        raise InputFileError(f'{path}: empty file')
-    if size < 8:
-        raise InputFileError(f'{path}: not an MCAP file (only {size} bytes)')
-    names = schemas.topics(namespace)
-    keep = set(Run.SIGNALS) if signals is None else set(signals) | {'position'}
-    keep |= set(require)
-    unknown = keep - set(Run.SIGNALS)
-    if unknown:
-        raise ParameterError(f'signals: unknown {sorted(unknown)}; choose from {Run.SIGNALS}')
-    wanted = {names['joint_states']: ('joint', frozenset(
-        f for f in ('velocity', 'effort') if f not in keep))}
-    if keep & {'reference', 'reference_velocity'}:
-        wanted[names['reference']] = ('joint', frozenset(
-            {'effort'} | ({'position'} if 'reference' not in keep else set())
-            | ({'velocity'} if 'reference_velocity' not in keep else set())))
-    if 'voltage' in keep:
-        wanted[names['voltage']] = ('scalar', frozenset())
+    path, size, names, wanted = _prepare(path, namespace, signals, require)
     prog = Progress(path.name, size, enabled=progress)
     reader = _Reader(path, wanted, joint, prog)
     try:
@@ -856,17 +944,7 @@ def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str 
         raise InputFileError(f'{path}: cannot read ({exc.strerror or exc})') from None
     finally:
         prog.finish()
-    for tp in reader.topics.values():
-        if tp.corrupt:
-            warn(f'{path.name}: {tp.topic}: skipped {tp.corrupt} undecodable messages')
-    js = reader.topics.get(names['joint_states'])
-    if js is None or js.count() == 0:
-        if damage is not None and reader.messages == 0:
-            raise InputFileError(f'{path}: corrupt or truncated at byte {damage.offset} '
-                                 f'({damage.reason}); no messages could be read')
-        found = ', '.join(sorted(reader.all_topics)) or 'none'
-        raise InputFileError(f'{path}: no {names["joint_states"]} messages '
-                             f'(topics in file: {found})')
+    joint_states_of(path, reader, names, damage)
     unusable: dict[str, str] = {}
     run = _assemble(path, reader, names, unusable, damaged=damage is not None)
     for field in require:

@@ -9,8 +9,16 @@ call the core's step functions (DESIGN.md §2).  What lives here:
   an invalid runtime update is rejected *with a reason* and the old value stays.
 * :class:`Timing` — the two timing modes (lockstep on ``/clock``, realtime on wall timers).
 * QoS profiles shared by publishers and subscribers so that they always match.
+* :class:`ManagedNode` — the lifecycle (managed node) base of plant, controller and
+  recorder: configure / activate / deactivate / cleanup / shutdown through the standard
+  ``lifecycle_msgs`` services, ``autostart`` for ``ros2 run`` alone.
+* :class:`LeanLoop` — the wait-set loop over the hot subscriptions and timers;
+  :class:`Pacer` — lockstep publishing that never outruns a lagging reliable reader;
+  :func:`read_joint_state` — stamp and values straight from JointState CDR bytes.
 * :func:`run_node` — a spin loop with our own SIGINT/SIGTERM handling so that every node
-  shuts down cleanly (and the recorder can flush) instead of dying inside a callback.
+  shuts down cleanly (and the recorder can flush) instead of dying inside a callback;
+  every publisher's last samples are acknowledged before the process exits.
+  ``MOTOR_COMP_PROFILE=DIR`` profiles the loop's CPU time (cProfile) per node.
 """
 from __future__ import annotations
 
@@ -20,6 +28,7 @@ import gc
 import math
 import os
 import signal
+import struct
 import sys
 import threading
 import time
@@ -33,6 +42,8 @@ from rclpy._rclpy_pybind11 import RCLError
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, \
     ParameterType, SetParametersResult
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle.node import LifecycleNodeMixin
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -91,6 +102,53 @@ def stamp_to_ns(stamp: Any) -> int:
 def set_stamp(stamp: Any, ns: int) -> None:
     """Write integer nanoseconds ``ns`` into a ``builtin_interfaces/Time`` in place."""
     stamp.sec, stamp.nanosec = divmod(int(ns), 1_000_000_000)
+
+
+_U32 = struct.Struct('<I')
+_STAMP = struct.Struct('<iI')
+_F64 = struct.Struct('<d')
+
+
+def read_joint_state(msg: Any) -> tuple[int, float | None, float | None, float | None]:
+    """Stamp [ns] and the first position, velocity, effort of a ``JointState``.
+
+    ``msg`` is a message object or its serialized CDR bytes (a ``raw=True``
+    subscription): the bytes are read directly — rclpy's deserialization builds four
+    Python objects per message (JointState, Header, Time, lists) and took ≈ 1/3 of the
+    controller's CPU per lockstep step.  A missing entry is None.  Layout (XCDR1,
+    alignment relative to the body after the 4-byte encapsulation header): stamp
+    int32 + uint32, frame_id string, name sequence<string>, then three
+    sequence<double>.  Big-endian CDR is deserialized the ordinary way.
+    """
+    if isinstance(msg, (bytes, bytearray, memoryview)):
+        data = bytes(msg)
+        if data[1] != 1:   # not CDR_LE: rare, let rclpy do it
+            from rclpy.serialization import deserialize_message
+            from sensor_msgs.msg import JointState
+            return read_joint_state(deserialize_message(data, JointState))
+        sec, nsec = _STAMP.unpack_from(data, 4)
+        off = 12 + _U32.unpack_from(data, 12)[0] + 4          # after frame_id
+        off = ((off - 4 + 3) & ~3) + 4
+        count = _U32.unpack_from(data, off)[0]
+        off += 4
+        for _ in range(count):                                  # names
+            off = ((off - 4 + 3) & ~3) + 4
+            off += 4 + _U32.unpack_from(data, off)[0]
+        first: list[float | None] = []
+        for _ in range(3):                                      # position, velocity, effort
+            off = ((off - 4 + 3) & ~3) + 4
+            count = _U32.unpack_from(data, off)[0]
+            off += 4
+            if count:
+                off = ((off - 4 + 7) & ~7) + 4
+                first.append(_F64.unpack_from(data, off)[0])
+                off += 8 * count
+            else:
+                first.append(None)
+        return sec * 1_000_000_000 + nsec, first[0], first[1], first[2]
+    pos, vel, eff = msg.position, msg.velocity, msg.effort
+    return (stamp_to_ns(msg.header.stamp), float(pos[0]) if len(pos) else None,
+            float(vel[0]) if len(vel) else None, float(eff[0]) if len(eff) else None)
 
 
 def period_ns(rate_hz: float) -> int:
@@ -304,6 +362,154 @@ class ParamNode(Node):
         return False
 
 
+#: shared by the managed nodes (plant, controller, recorder)
+AUTOSTART = Param(
+    'autostart', True, 'Managed node: configure and activate at start, so `ros2 run` '
+    'alone runs the loop; false = wait in unconfigured for lifecycle transitions '
+    '(<node>/change_state), as a lifecycle manager drives them', read_only=True)
+
+
+class ManagedNode(ParamNode, LifecycleNode):
+    """A :class:`ParamNode` that is a ROS 2 managed (lifecycle) node.
+
+    unconfigured → ``configure`` → inactive → ``activate`` → active → ``deactivate`` →
+    inactive → ``cleanup`` → unconfigured, and ``shutdown`` from any of them, through
+    the standard ``lifecycle_msgs`` services ``<node>/change_state`` and
+    ``<node>/get_state`` (as ros2_control hardware and Nav2 servers are driven).
+    Subclasses implement :meth:`configure`, :meth:`activate`, :meth:`deactivate` and
+    :meth:`cleanup`; raising :class:`MotorCompError` there fails the transition with
+    the reason logged (the node stays in its state, or returns to unconfigured after a
+    failed configure, as the lifecycle design says).  With ``autostart`` (default) the
+    node configures and activates itself at start; a failure is then the process's
+    one-line error (exit status 2).
+
+    Parameters (and their validation) exist in every state; the loop's topics are
+    subscribed only while active, so a plant waiting for its peers does not start a
+    run that an inactive controller or recorder would miss.
+    """
+
+    def __init__(self, name: str, **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
+        self._transition_error: Exception | None = None
+
+    def autostart(self) -> None:
+        """Configure and activate now if ``autostart`` is set (call after declare_params)."""
+        self.declare_params([AUTOSTART])
+        if not self.p['autostart']:
+            self.get_logger().info('managed node: unconfigured, waiting for lifecycle '
+                                   'transitions (autostart false)')
+            return
+        for trigger in (self.trigger_configure, self.trigger_activate):
+            if trigger() != TransitionCallbackReturn.SUCCESS:
+                err = self._transition_error
+                raise err if isinstance(err, MotorCompError) else MotorCompError(str(err))
+
+    @property
+    def lifecycle_state(self) -> str:
+        """Label of the current lifecycle state (``unconfigured``, ``active`` …)."""
+        return self._state_machine.current_state[1]
+
+    @property
+    def active(self) -> bool:
+        """True in the ``active`` state."""
+        return self._state_machine.current_state[1] == 'active'
+
+    def _transition(self, name: str, step: Callable[[], None]) -> TransitionCallbackReturn:
+        self._transition_error = None
+        try:
+            step()
+        except (MotorCompError, rclpy.exceptions.ParameterException, OSError) as exc:
+            self._transition_error = exc
+            self.get_logger().error(f'{name} failed: {exc}')
+            return TransitionCallbackReturn.FAILURE
+        self.get_logger().info(f'lifecycle: {name} done')
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Lifecycle callback: build what the node needs (see :meth:`configure`)."""
+        return self._transition('configure', self.configure)
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Lifecycle callback: join the loop (see :meth:`activate`)."""
+        LifecycleNode.on_activate(self, state)   # lifecycle publishers, if any
+        return self._transition('activate', self.activate)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Lifecycle callback: leave the loop (see :meth:`deactivate`)."""
+        LifecycleNode.on_deactivate(self, state)
+        return self._transition('deactivate', self.deactivate)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Lifecycle callback: release what configure built (see :meth:`cleanup`)."""
+        return self._transition('cleanup', self.cleanup)
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Lifecycle callback: from any state, leave the loop and release everything."""
+        def down() -> None:
+            if state.label == 'active':
+                self.deactivate()
+            if state.label in ('active', 'inactive'):
+                self.cleanup()
+        return self._transition('shutdown', down)
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Lifecycle callback after an exception in a transition: release, unconfigured."""
+        self.get_logger().error(f'lifecycle error in {state.label}: releasing resources')
+        try:
+            self.deactivate()
+            self.cleanup()
+        except Exception as exc:  # noqa: BLE001 - best effort on the error path
+            self.get_logger().error(f'cleanup after error failed: {exc}')
+        return TransitionCallbackReturn.SUCCESS
+
+    def _LifecycleNodeMixin__on_change_state(self, req: Any, resp: Any) -> Any:
+        """``<node>/change_state``: an unavailable transition is refused, not a crash.
+
+        rclpy raises from the service callback when the transition does not exist in
+        the current state (e.g. ``activate`` while unconfigured), which would end the
+        node's spin loop; here it is answered ``success: false`` with the reason logged.
+        """
+        available = self._state_machine.available_transitions
+        label, tid = req.transition.label, req.transition.id
+        if not any((t[1] == label) if label else (t[0] == tid) for t in available):
+            self.get_logger().warning(
+                f'refused lifecycle transition {label or f"id {tid}"}: not available in '
+                f'state {self.lifecycle_state} (available: '
+                f'{", ".join(t[1] for t in available) or "none"})')
+            resp.success = False
+            return resp
+        try:
+            return LifecycleNodeMixin._LifecycleNodeMixin__on_change_state(self, req, resp)
+        except RCLError as exc:   # a race with a transition of our own
+            self.get_logger().warning(f'refused lifecycle transition: {exc}')
+            resp.success = False
+            return resp
+
+    def configure(self) -> None:
+        """Build the node's state from its parameters (raise MotorCompError to refuse)."""
+
+    def activate(self) -> None:
+        """Subscribe the loop's topics and start working."""
+
+    def deactivate(self) -> None:
+        """Stop working: unsubscribe, stop timers (must be safe to call when inactive)."""
+
+    def cleanup(self) -> None:
+        """Release what :meth:`configure` built (must be safe to call when unconfigured)."""
+
+    def destroy_hot(self, entity: Any) -> None:
+        """Unmark and destroy a hot subscription or timer (None is ignored)."""
+        if entity is None:
+            return
+        for kind in (getattr(self, 'hot_subscriptions', []), getattr(self, 'hot_timers', [])):
+            if entity in kind:
+                kind.remove(entity)
+        if isinstance(entity, Timer):
+            self.destroy_timer(entity)
+        else:
+            self.destroy_subscription(entity)
+
+
 class LeanLoop:
     """A wait-set loop over a node's hot subscriptions and timers.
 
@@ -322,10 +528,21 @@ class LeanLoop:
         self._sizes = (-1, -1)
         self._ws = None
 
+    @property
+    def empty(self) -> bool:
+        """True when the node has no hot entity (e.g. a managed node not yet active)."""
+        return not (getattr(self.node, 'hot_subscriptions', None)
+                    or getattr(self.node, 'hot_timers', None))
+
     def spin_once(self, timeout_ns: int) -> int:
-        """Wait up to ``timeout_ns`` for hot entities; run their callbacks; how many ran."""
+        """Wait up to ``timeout_ns`` for hot entities; run their callbacks; how many ran.
+
+        With no hot entity there is nothing to wait on: returns 0 at once.
+        """
         subs = getattr(self.node, 'hot_subscriptions', ())
         timers = getattr(self.node, 'hot_timers', ())
+        if not subs and not timers:
+            return 0
         if (len(subs), len(timers)) != self._sizes:
             self._sizes = (len(subs), len(timers))
             self._ws = _rclpy.WaitSet(len(subs), 0, len(timers), 0, 0, 0,
@@ -350,6 +567,37 @@ class LeanLoop:
                 tmr.callback()
                 ran += 1
         return ran
+
+
+class Pacer:
+    """Lockstep publishing that never outruns a reliable reader by a publisher's history.
+
+    The loop's publishers keep the last :data:`LOOP_QOS` depth (1000) samples; a reader
+    that falls further behind (the recorder, starved of CPU on a loaded machine) loses
+    the oldest — measured: a 600 s lockstep soak with the machine at load 13 recorded
+    591 502 of 600 000 steps.  Every ``every`` messages the publisher waits until every
+    matched reader acknowledged what it has sent (``wait_for_all_acked``, at most
+    ``timeout`` s, then it goes on: a reader that died is dropped by DDS later).  When
+    the readers keep up the wait returns at once; when one lags, the lockstep loop runs
+    at its pace instead of losing its data.  Not for realtime: a wall-clock loop must
+    not wait for a recorder.
+    """
+
+    def __init__(self, publisher: Any, *, every: int = 250, timeout: float = 1.0) -> None:
+        from rclpy.duration import Duration
+        self.publisher = publisher
+        self.every = every
+        self._timeout = Duration(nanoseconds=int(timeout * 1e9))
+        self._n = 0
+        self.waits = 0   # waits that ran into the timeout
+
+    def publish(self, msg: Any) -> None:
+        """Publish; every ``every`` messages wait for the readers' acknowledgements."""
+        self.publisher.publish(msg)
+        self._n += 1
+        if self._n % self.every == 0 and not self.publisher.wait_for_all_acked(
+                self._timeout):
+            self.waits += 1
 
 
 #: delay histograms of the realtime nodes: 0.1 ms bins, the last one collects ≥ 20 ms
@@ -396,6 +644,10 @@ class _Usage:
         self.node = node
         self.rss_start = math.nan
         self._timer = node.create_timer(5.0, self._sample)
+        #: CPU time [s] and hot callbacks since the first hot callback (the loop's cost,
+        #: without start-up: imports and numba cache loads vary from start to start)
+        self.loop_cpu0: float | None = None
+        self.callbacks = 0
 
     def _sample(self) -> None:
         self.rss_start = rss_mib()
@@ -403,8 +655,26 @@ class _Usage:
 
     def report(self) -> None:
         cpu = time.process_time()
+        loop = cpu - self.loop_cpu0 if self.loop_cpu0 is not None else 0.0
         self.node.get_logger().info(f'resources: cpu_s={cpu:.3f} rss_start_mib='
-                                    f'{self.rss_start:.2f} rss_end_mib={rss_mib():.2f}')
+                                    f'{self.rss_start:.2f} rss_end_mib={rss_mib():.2f} '
+                                    f'loop_cpu_s={loop:.3f} callbacks={self.callbacks}')
+
+
+def _profiler(node: Node) -> Any:
+    """Diagnostics: with ``MOTOR_COMP_PROFILE=DIR`` profile the spin loop (cProfile).
+
+    The stats go to ``DIR/<node name>.prof`` at a clean exit (``bench/ros_loop.py
+    --profile DIR`` prints where the loop's time goes).
+    """
+    where = os.environ.get('MOTOR_COMP_PROFILE')
+    if not where:
+        return None
+    import cProfile
+    profile = cProfile.Profile(time.process_time)   # CPU, not waiting
+    profile.path = str(Path(where) / f'{node.get_name()}.prof')
+    profile.enable()
+    return profile
 
 
 class _Stop:
@@ -417,6 +687,30 @@ class _Stop:
     def __call__(self, signum: int, frame: Any) -> None:  # noqa: ARG002 - signal API
         self.signal = signum
         self.event.set()
+
+
+#: how often the spin loop lets rclpy's executor serve the non-hot entities (parameter
+#: services, lifecycle services, start-up timers): their response time [ns]
+EXECUTOR_PERIOD_NS = 50_000_000
+
+
+def _wait_acked(node: Node, timeout: float = 2.0) -> None:
+    """Let every reliable reader receive what this node published before it exits.
+
+    A process that exits right after its last publish takes the samples its readers
+    have not acknowledged with it: on a loaded machine a starved recorder then misses
+    the controller's last commands (a realtime run recorded 934 of 1000 steps).
+    """
+    from rclpy.duration import Duration
+    deadline = time.monotonic() + timeout
+    for pub in list(node.publishers):
+        left = deadline - time.monotonic()
+        if left <= 0:
+            break
+        try:
+            pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
+        except (RCLError, rclpy.exceptions.InvalidHandle):
+            pass   # a publisher destroyed by the node's own finish()
 
 
 def run_node(factory: Callable[[], ParamNode], argv: Iterable[str] | None = None) -> int:
@@ -451,13 +745,33 @@ def run_node(factory: Callable[[], ParamNode], argv: Iterable[str] | None = None
         gc.freeze()
         lean = LeanLoop(node)
         last = 0.0
+        profile = _profiler(node)
         while not stop.event.is_set() and not node.done:
-            ran = lean.spin_once(5_000_000)
+            if lean.empty:   # inactive managed node: only services and timers to serve
+                executor.spin_once(timeout_sec=0.005)
+                continue
+            ran = lean.spin_once(EXECUTOR_PERIOD_NS)
+            if ran:
+                if usage.loop_cpu0 is None:
+                    usage.loop_cpu0 = time.process_time()
+                usage.callbacks += ran
             now = time.monotonic()
-            if not ran or now - last > 0.005:   # services, parameter events, timers
+            # services, parameter events, other timers: every EXECUTOR_PERIOD_NS, not
+            # after each idle wait — a loaded machine makes the lean wait time out often,
+            # and rclpy's spin_once (it rebuilds its wait set, tasks, generators) then
+            # took half of a loop process's CPU (cProfile on CPU time, bench/ros_loop.py
+            # --profile)
+            if now - last > EXECUTOR_PERIOD_NS * 1e-9:
                 executor.spin_once(timeout_sec=0.0)
                 last = now
         clean = True
+        if profile is not None:
+            profile.disable()
+            try:
+                profile.dump_stats(profile.path)
+            except OSError as exc:
+                print(f'{prog}: warning: MOTOR_COMP_PROFILE: cannot write {profile.path} '
+                      f'({exc.strerror})', file=sys.stderr)
     except (MotorCompError, rclpy.exceptions.ParameterException) as exc:
         print(f'{prog}: error: {exc}', file=sys.stderr)
         status = 2
@@ -466,6 +780,7 @@ def run_node(factory: Callable[[], ParamNode], argv: Iterable[str] | None = None
             try:
                 node.finish(executor if clean else None)
                 if clean:
+                    _wait_acked(node)
                     usage.report()
             finally:
                 node.destroy_node()

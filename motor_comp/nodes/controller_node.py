@@ -52,7 +52,12 @@ Reliability (issue 8):
   (``Controller.set_mode/set_feedforward``), adaptive estimates kept or reset according
   to ``keep_estimates``;
 * every gain ``<mode>.<field>`` (units and ranges from the control module) is live
-  tunable; an invalid value is rejected with the reason and nothing changes.
+  tunable; an invalid value is rejected with the reason and nothing changes;
+* ``compensation_model`` (a model YAML) or ``compensation_table`` (a position table
+  CSV of ``motor-comp export-table``) adds that model's effects as feedforward at the
+  reference state in any mode (:mod:`motor_comp.control.compensation`); set at run time
+  the file is loaded and validated first — a bad file is rejected with the reason and
+  the old compensation stays — and switched in bumplessly (the integrator re-balanced).
 """
 from __future__ import annotations
 
@@ -65,12 +70,15 @@ import numpy as np
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
+from motor_comp.control import compensation
 from motor_comp.control.controller import ControlMode, Feedforward, default_params, \
     make_controller
 from motor_comp.errors import ParameterError
 from motor_comp.nodes.common import DEFAULT_NAMESPACE, DELAY_BIN_NS, DELAY_BINS, LOOP_QOS, \
-    REALTIME_PRIORITY, SUB_QOS, TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, Param, \
-    ParamNode, Timing, format_delays, run_node, set_realtime_priority, stamp_to_ns
+    REALTIME_PRIORITY, SUB_QOS, TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, \
+    ManagedNode, Param, Timing, format_delays, read_joint_state, run_node, \
+    set_realtime_priority
+from motor_comp.control.nominal import derive_nominal
 from motor_comp.physics.config import PlantConfig, load_plant
 
 BASE_PARAMS = (
@@ -89,6 +97,11 @@ BASE_PARAMS = (
     Param('dt_source', 'nominal', 'Realtime: period passed to the law, the nominal '
           '1/control_rate or the difference of the measurement stamps',
           choices=('nominal', 'stamps')),
+    Param('compensation_model', '', 'Model file (YAML) whose effects are added as '
+          'feedforward at the reference state, in any mode (empty = none); reloaded when '
+          'set, a bad file is rejected and the old compensation stays'),
+    Param('compensation_table', '', 'Position compensation table (CSV of motor-comp '
+          'export-table), interpolated (empty = none; exclusive with compensation_model)'),
     REALTIME_PRIORITY,
 )
 
@@ -104,30 +117,55 @@ def gain_params(plant: PlantConfig) -> tuple[Param, ...]:
     return tuple(out)
 
 
-class ControllerNode(ParamNode):
-    """Computes one command per measurement with the core controller step."""
+class ControllerNode(ManagedNode):
+    """Computes one command per measurement with the core controller step.
+
+    Managed node: ``configure`` builds the control law from the parameters and the
+    ``voltage`` publisher; ``activate`` subscribes ``reference`` and ``joint_states``
+    and starts the stale-data watchdog; while not active the node subscribes nothing
+    and so commands nothing (not even the watchdog's 0 V); ``deactivate`` drops a
+    pending measurement; ``cleanup`` drops the law (adaptive estimates included).
+    """
 
     def __init__(self) -> None:
         super().__init__('controller_node', namespace=DEFAULT_NAMESPACE)
         self.declare_params(BASE_PARAMS)
         cfg = load_plant(self.p['plant'])
         self.declare_params(gain_params(cfg))   # defaults depend on the plant
-        self.cfg = dataclasses.replace(cfg, control_rate=self.p['control_rate'])
+        # the law knows the nominal model derived from the plant file, never the plant
+        self.cfg = dataclasses.replace(derive_nominal(cfg), control_rate=self.p['control_rate'])
         self.timing = Timing(self.p['timing'])
         self.dt = 1.0 / self.p['control_rate']
+        self.controller = None
+        self.pub = None
+        self._ref_sub = self._meas_sub = self._match_timer = self._watchdog_timer = None
+        self.steps = 0
+        self.published = 0   # commands sent (law and watchdog zeros), over all activations
+        self.autostart()
+
+    def configure(self) -> None:
+        """Build the control law (all modes' gains, ready for a switch) and the publisher."""
         mode = self.p['mode']
         gains = {k.split('.', 1)[1]: v for k, v in self.p.items()
                  if k.startswith(mode + '.')}
-        self.controller = make_controller(mode, plant=self.cfg,
-                                          feedforward=self.p['feedforward'], **gains)
+        controller = make_controller(mode, plant=self.cfg,
+                                     feedforward=self.p['feedforward'], **gains)
+        comp = load_compensation(self.p)   # a bad file fails configure before anything
+        if comp is not None:
+            controller.set_compensation(comp)
+            self.get_logger().info(comp.summary())
+        self.controller = controller
         for m in ControlMode:   # the other modes' gains, ready for a switch
             if m.label != mode:
                 self.controller.update(mode=m, **{k.split('.', 1)[1]: v
                                                   for k, v in self.p.items()
                                                   if k.startswith(m.label + '.')})
         # load the compiled step now (numba cache), not inside the first control period
-        make_controller(mode, plant=self.cfg, feedforward=self.p['feedforward'],
-                        **gains).step(0.0, 0.0, 0.0, 0.0, 0.0, self.dt)
+        warm = make_controller(mode, plant=self.cfg, **gains)
+        warm.step(0.0, 0.0, 0.0, 0.0, 0.0, self.dt)
+        # and the compensation's switch-in (a run-time compensation_model must not stall
+        # the loop on a first compilation)
+        warm.set_compensation(compensation.from_model(self.cfg.model, source='warm-up'))
         self._refs: dict[int, tuple[float, float, float]] = {}
         self._ref_latest: tuple[float, float, float] | None = None
         self._ref_stamp_ns = 0
@@ -146,16 +184,41 @@ class ControllerNode(ParamNode):
         self.steps = 0
         self._out = Float64()
         self.pub = self.create_publisher(Float64, TOPIC_VOLTAGE, LOOP_QOS)
+        self.get_logger().info(f'{self.timing.value} controller {self.controller.describe()}')
+        if self.timing is Timing.REALTIME:
+            set_realtime_priority(self, self.p['realtime_priority'])
+
+    def activate(self) -> None:
+        """Subscribe ``reference`` (then ``joint_states``) and start the watchdog."""
+        now = time.monotonic()
+        self._last_ref_rx = self._last_meas_rx = now
+        # raw CDR: read_joint_state takes the numbers straight from the bytes
         self._ref_sub = self.mark_hot(self.create_subscription(
-            JointState, TOPIC_REFERENCE, self._on_reference, SUB_QOS))
+            JointState, TOPIC_REFERENCE, self._on_reference, SUB_QOS, raw=True))
         # measurements only once the trajectory matched: the plant starts when it sees
         # our joint_states reader, and reference 0 must not be missed
         self._since = now
         self._match_timer = self.create_timer(0.05, self._subscribe_measurements)
         self._watchdog_timer = self._make_watchdog(self.p['stale_timeout'])
-        self.get_logger().info(f'{self.timing.value} controller {self.controller.describe()}')
-        if self.timing is Timing.REALTIME:
-            set_realtime_priority(self, self.p['realtime_priority'])
+
+    def deactivate(self) -> None:
+        """Unsubscribe, stop the watchdog, forget a measurement waiting for its command."""
+        for sub in (self._ref_sub, self._meas_sub):
+            self.destroy_hot(sub)
+        for tmr in (self._match_timer, self._watchdog_timer):
+            if tmr is not None:
+                self.destroy_timer(tmr)
+        self._ref_sub = self._meas_sub = self._match_timer = self._watchdog_timer = None
+        self._meas = None
+        self._stale = False
+
+    def cleanup(self) -> None:
+        """Drop the law and the publisher (a new configure starts from the parameters)."""
+        self.deactivate()
+        if self.pub is not None:
+            self.destroy_publisher(self.pub)
+        self.pub = None
+        self.controller = None
 
     def _make_watchdog(self, stale_timeout: float) -> Any:
         # a quarter of the timeout: stale data is noticed within 1.25·stale_timeout
@@ -164,19 +227,20 @@ class ControllerNode(ParamNode):
     def _subscribe_measurements(self) -> None:
         if self._ref_sub.get_publisher_count() < 1 and time.monotonic() - self._since < 10.0:
             return
-        self._match_timer.cancel()
+        self.destroy_timer(self._match_timer)
+        self._match_timer = None
         self._meas_sub = self.mark_hot(self.create_subscription(
-            JointState, TOPIC_JOINT_STATES, self._on_measurement, SUB_QOS))
+            JointState, TOPIC_JOINT_STATES, self._on_measurement, SUB_QOS, raw=True))
 
     # -- messages --------------------------------------------------------------------
-    def _finite(self, msg: JointState, what: str, n: int) -> tuple[float, ...] | None:
-        try:
-            vals = (float(msg.position[0]), float(msg.velocity[0]),
-                    float(msg.effort[0]) if len(msg.effort) else 0.0)[:n]
-        except IndexError:
-            vals = ()
-        if len(vals) == n and all(math.isfinite(v) for v in vals):
-            return vals
+    def _finite(self, fields: tuple[int, float | None, float | None, float | None],
+                what: str, n: int) -> tuple[float, ...] | None:
+        """Return the first ``n`` of position, velocity, effort (0 if absent) if finite."""
+        _, pos, vel, eff = fields
+        if pos is not None and vel is not None:
+            vals = (pos, vel, 0.0 if eff is None else eff)[:n]
+            if all(math.isfinite(v) for v in vals):
+                return vals
         self.ignored += 1
         # one call site per kind: rclpy throttles per call site
         if what == 'reference':
@@ -187,8 +251,9 @@ class ControllerNode(ParamNode):
                                       throttle_duration_sec=1.0)
         return None
 
-    def _on_reference(self, msg: JointState) -> None:
-        vals = self._finite(msg, 'reference', 3)
+    def _on_reference(self, msg: JointState | bytes) -> None:
+        fields = read_joint_state(msg)
+        vals = self._finite(fields, 'reference', 3)
         if vals is None:
             return
         self._last_ref_rx = time.monotonic()
@@ -196,7 +261,7 @@ class ControllerNode(ParamNode):
             self._stale = False
             self.get_logger().info('reference is back: control resumes')
         self._ref_latest = vals
-        t_ns = stamp_to_ns(msg.header.stamp)
+        t_ns = fields[0]
         if self.timing is Timing.REALTIME:
             self._ref_stamp_ns = t_ns
             self._rt_refs[t_ns] = vals
@@ -207,14 +272,15 @@ class ControllerNode(ParamNode):
         if self._meas is not None and self._meas[0] == t_ns:
             self._answer()
 
-    def _on_measurement(self, msg: JointState) -> None:
+    def _on_measurement(self, msg: JointState | bytes) -> None:
         if self.timing is Timing.REALTIME:
             msg = self._newest(msg)
-        vals = self._finite(msg, 'measurement', 2)
+        fields = read_joint_state(msg)
+        vals = self._finite(fields, 'measurement', 2)
         if vals is None:
             return
         self._last_meas_rx = time.monotonic()
-        t_ns = stamp_to_ns(msg.header.stamp)
+        t_ns = fields[0]
         self._meas = (t_ns, vals[0], vals[1])
         self._meas_since = self._last_meas_rx
         if self.timing is Timing.REALTIME:
@@ -233,7 +299,7 @@ class ControllerNode(ParamNode):
             del self._refs[old]
         self._command(ref)
 
-    def _newest(self, msg: JointState) -> JointState:
+    def _newest(self, msg: JointState | bytes) -> JointState | bytes:
         """Realtime: the newest measurement queued behind ``msg`` (the backlog is skipped)."""
         sub = self._meas_sub
         while True:
@@ -292,12 +358,14 @@ class ControllerNode(ParamNode):
         self._out.data = self.controller.step(ref[0], ref[1], ref[2], y, vy,
                                               self.dt if dt is None else dt)
         self.pub.publish(self._out)
+        self.published += 1
         self._meas = None if self.timing is Timing.LOCKSTEP else self._meas
         self.steps += 1
 
     def _zero(self, why: str) -> None:
         self._out.data = 0.0
         self.pub.publish(self._out)
+        self.published += 1
         self.get_logger().warning(f'stale data ({why}): commanding 0 V',
                                   throttle_duration_sec=1.0)
         if self.timing is Timing.LOCKSTEP:
@@ -323,6 +391,7 @@ class ControllerNode(ParamNode):
 
     def finish(self, executor: Any) -> None:
         """Log what the loop did (realtime: skipped backlog, duplicates, sample age)."""
+        self.get_logger().info(f'stopped: {self.published} commands published')
         if self.timing is Timing.REALTIME:
             pct = format_delays(self.latency_hist)
             self.get_logger().info(f'timing: {self.steps} commands, {self.skipped} backlog '
@@ -334,6 +403,8 @@ class ControllerNode(ParamNode):
     def apply_params(self, changed: Mapping[str, Any], new: Mapping[str, Any]) -> None:
         """Validate every change first, then apply (all or nothing)."""
         ctl = self.controller
+        if ctl is None:   # unconfigured: configure builds the law from the parameters
+            ctl = make_controller(new['mode'], plant=self.cfg)
         staged: dict[ControlMode, dict[str, float]] = {}
         for name, value in changed.items():
             if '.' in name:
@@ -346,18 +417,52 @@ class ControllerNode(ParamNode):
             if ff & Feedforward.GMS and self.cfg.model.get('presliding') is None:
                 raise ParameterError(f'feedforward {ff.label!r} needs a presliding (GMS) '
                                      f'effect in the nominal plant {self.cfg.source}')
+        comp_changed = bool({'compensation_model', 'compensation_table'} & changed.keys())
+        comp = load_compensation(new) if comp_changed else ctl.compensation
+        if comp is not None and comp.has_friction and new['feedforward'] != 'none':
+            raise ParameterError(f'{comp.source} compensates friction; with feedforward '
+                                 f'{new["feedforward"]!r} it would be counted twice: set '
+                                 f'feedforward none')
+        if self.controller is None:
+            return
+        if comp_changed and comp is None:   # off first, then a friction feedforward may go on
+            ctl.set_compensation(None)
         for mode, fields in staged.items():
             ctl.update(mode=mode, **fields)
         if 'mode' in changed:
             ctl.set_mode(new['mode'], keep_estimates=new['keep_estimates'])
         if 'feedforward' in changed:
             ctl.set_feedforward(new['feedforward'])
-        if 'stale_timeout' in changed:   # the watchdog's period follows the timeout
+        if comp_changed:
+            if comp is not None:
+                ctl.set_compensation(comp)
+            self.get_logger().info(f'{comp.summary() if comp else "compensation off"} '
+                                   f'from command {self.steps}')
+        if 'stale_timeout' in changed and self._watchdog_timer is not None:
+            # the watchdog's period follows the timeout
             self.destroy_timer(self._watchdog_timer)
             self._watchdog_timer = self._make_watchdog(new['stale_timeout'])
         if {'mode', 'feedforward'} & changed.keys():
             self.get_logger().info(f'now {ctl.mode.label} + {ctl.feedforward.label} '
                                    f'feedforward from command {self.steps}')
+
+
+def load_compensation(new: Mapping[str, Any]) -> Any:
+    """Load the compensation the parameters name (None if both are empty); one-line errors.
+
+    ``compensation_model`` and ``compensation_table`` are exclusive; setting one while
+    the other is set is refused, so the user clears one first (no silent precedence).
+    """
+    from motor_comp.control import compensation
+    model, table = new.get('compensation_model', ''), new.get('compensation_table', '')
+    if model.strip() and table.strip():
+        raise ParameterError('compensation_model and compensation_table are exclusive: '
+                             'clear one first (set it to an empty string)')
+    if model.strip():
+        return compensation.load_model(model)
+    if table.strip():
+        return compensation.load_table(table)
+    return None
 
 
 def main(args: list[str] | None = None) -> int:

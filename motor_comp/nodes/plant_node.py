@@ -35,6 +35,7 @@ step is taken at 0 V, so the loop goes on.
 """
 from __future__ import annotations
 
+import array
 import math
 import time
 from typing import Any, Mapping
@@ -48,10 +49,12 @@ from std_msgs.msg import Float64
 from motor_comp.errors import ParameterError
 from motor_comp.nodes.common import DEFAULT_NAMESPACE, DELAY_BIN_NS, DELAY_BINS, JOINT_NAME, \
     LOOP_QOS, REALTIME_PRIORITY, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, TOPIC_VOLTAGE, \
-    Param, ParamNode, Timing, format_delays, period_ns, run_node, set_realtime_priority, \
+    ManagedNode, Pacer, Param, Timing, format_delays, period_ns, run_node, set_realtime_priority, \
     set_stamp
+from motor_comp.physics import kernel as K
+from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.config import load_plant
-from motor_comp.physics.plant import Plant, StepLoad
+from motor_comp.physics.plant import Plant, StepLoad, pack_params
 
 PARAMS = (
     Param('plant', 'pmlm', 'Plant: pmlm, ballscrew, or a plant YAML file', read_only=True),
@@ -69,6 +72,9 @@ PARAMS = (
     Param('load_force', 0.0, 'External step load force (subtracted like friction)', 'N',
           -1e5, 1e5),
     Param('load_start', 0.0, 'Sim time the step load switches on', 's', 0.0, 1e7),
+    Param('friction_scale', 1.0, 'Scale of the plant friction levels (coulomb fc, '
+          'stribeck fs, viscous fv): a worn, cold or re-lubricated axis, live', '', 0.0,
+          100.0),
     Param('expected_subscribers', 2,
           'Lockstep: readers of joint_states to wait for before step 0 '
           '(controller + recorder)', '', 0, 100, read_only=True),
@@ -81,27 +87,52 @@ PARAMS = (
 )
 
 
-class PlantNode(ParamNode):
-    """The axis: advances on each command (lockstep) or on a wall timer (realtime)."""
+class PlantNode(ManagedNode):
+    """The axis: advances on each command (lockstep) or on a wall timer (realtime).
+
+    Managed node: ``configure`` builds the plant (from ``plant``, ``seed``, ``x0`` …)
+    and its publishers; ``activate`` subscribes ``voltage`` and starts the run once its
+    peers are there (lockstep: at the current step, so deactivate/activate pauses and
+    resumes the same run); ``deactivate`` unsubscribes and stops the timers (the axis
+    holds still: no step is taken without a command); ``cleanup`` drops the plant (the
+    next configure starts a new run at step 0).
+    """
 
     def __init__(self) -> None:
         super().__init__('plant_node', namespace=DEFAULT_NAMESPACE)
         self.declare_params(PARAMS)
+        self.timing = Timing(self.p['timing'])
+        self.plant: Plant | None = None
+        self.pub_js = self.pub_clock = None
+        self._voltage_sub = self._peer_timer = self._tick_timer = None
+        self._finished = False
+        self.published = 0
+        self.k = 0
+        self.refused = 0
+        self.autostart()
+
+    def configure(self) -> None:
+        """Build the plant from the parameters, its publishers; step 0, nothing sent yet."""
         p = self.p
-        self.timing = Timing(p['timing'])
         cfg = load_plant(p['plant'])
         physics = p['physics_rate'] or cfg.physics_rate
-        self.plant = Plant(cfg.model, sensors=cfg.sensors, physics_rate=physics,
-                           load=StepLoad(p['load_force'], p['load_start']), seed=p['seed'],
-                           x0=p['x0'])
+        self._model0 = cfg.model
+        try:
+            plant = Plant(scale_friction(cfg.model, p['friction_scale']), sensors=cfg.sensors,
+                          physics_rate=physics,
+                          load=StepLoad(p['load_force'], p['load_start']), seed=p['seed'],
+                          x0=p['x0'])
+        except ValueError as exc:
+            raise ParameterError(str(exc)) from None
         self.dt_ns = period_ns(p['control_rate'])
         self.dt = 1.0 / p['control_rate']   # the simulator's T, bit for bit
-        self.plant.substeps(self.dt)   # validates rate compatibility up front
+        plant.substeps(self.dt)   # validates rate compatibility up front
         # load the compiled kernels now (numba cache) rather than inside the first tick
         warm = Plant(cfg.model, sensors=cfg.sensors, physics_rate=physics)
         warm.measure(self.dt)
         warm.step(0.0, self.dt, f_ext=0.0)
         cfg.model.input_force(0.0, 0.0)
+        self.plant = plant
         self.n_steps = int(round(p['duration'] / self.dt)) if p['duration'] > 0 else -1
         self.k = 0
         self.refused = 0
@@ -115,27 +146,61 @@ class PlantNode(ParamNode):
         self.jitter_hist = np.zeros(DELAY_BINS + 1, dtype=np.int64)
         self._tick_ns: int | None = None   # realtime: wall time of the last measurement
         self._sub_done = 0                  # realtime: physics steps done in this period
-        self.n_sub = self.plant.substeps(self.dt)
+        self.n_sub = plant.substeps(self.dt)
         self.phys_ns = self.dt_ns // self.n_sub
         self._finished = False
         self._started = False
         self._u = 0.0            # realtime: latest command (zero-order hold)
-        self._js = JointState(name=[JOINT_NAME])
+        self._js = JointState(name=[JOINT_NAME], position=array.array('d', [0.0]),
+                              velocity=array.array('d', [0.0]), effort=array.array('d', [0.0]))
         self._js.header.frame_id = JOINT_NAME
+        # the message's own arrays (the setters copy): written in place each step
+        self._pos, self._vel, self._eff = self._js.position, self._js.velocity, self._js.effort
         self._clock_msg = Clock()
         self.pub_js = self.create_publisher(JointState, TOPIC_JOINT_STATES, LOOP_QOS)
         self.pub_clock = (self.create_publisher(Clock, TOPIC_CLOCK, LOOP_QOS)
                           if self.timing is Timing.LOCKSTEP else None)
-        self.mark_hot(self.create_subscription(Float64, TOPIC_VOLTAGE, self._on_voltage,
-                                               SUB_QOS))
-        # both modes wait for their peers, so no early sample goes unanswered
-        self._waiting_since = time.monotonic()
-        self._peer_timer = self.create_timer(0.05, self._wait_for_peers)
+        # lockstep: never outrun a lagging reader (the recorder) by the writers' history.
+        # Pacing joint_states alone bounds the recorder's lag on every topic (it reads them
+        # all in one thread); /clock's readers are in the loop and cannot lag.  Each paced
+        # wait costs ~70 ms of DDS acknowledgement round (measured: pacing both topics every
+        # 250 messages halved the lockstep rate, 2158 -> 964 steps/s).
+        self._js_out = (Pacer(self.pub_js, every=500) if self.pub_clock is not None
+                        else self.pub_js)
+        self._clock_out = self.pub_clock
         self.get_logger().info(
             f'{cfg.kind.value} plant from {cfg.source}, {self.timing.value}, '
             f'{p["control_rate"]:g} Hz control, {physics:g} Hz physics')
         if self.timing is Timing.REALTIME:
             set_realtime_priority(self, p['realtime_priority'])
+
+    def activate(self) -> None:
+        """Subscribe ``voltage``; (re)start the run once the peers matched."""
+        self._voltage_sub = self.mark_hot(self.create_subscription(
+            Float64, TOPIC_VOLTAGE, self._on_voltage, SUB_QOS))
+        # both modes wait for their peers, so no early sample goes unanswered
+        self._started = False
+        self._waiting_since = time.monotonic()
+        self._peer_timer = self.create_timer(0.05, self._wait_for_peers)
+
+    def deactivate(self) -> None:
+        """Stop: no more samples or steps until activated again."""
+        self.destroy_hot(self._voltage_sub)
+        self.destroy_hot(self._tick_timer)
+        if self._peer_timer is not None:
+            self.destroy_timer(self._peer_timer)
+        self._voltage_sub = self._tick_timer = self._peer_timer = None
+        self._started = False
+        self._tick_ns = None   # realtime: the pause is slip, not a long period
+
+    def cleanup(self) -> None:
+        """Drop the plant and its publishers (a new configure starts a new run)."""
+        self.deactivate()
+        for pub in (self.pub_js, self.pub_clock):
+            if pub is not None:
+                self.destroy_publisher(pub)
+        self.pub_js = self.pub_clock = None
+        self.plant = None
 
     # -- lockstep --------------------------------------------------------------------
     def _peers_ready(self) -> bool:
@@ -152,38 +217,45 @@ class PlantNode(ParamNode):
                 self.get_logger().info('waiting for controller/trajectory/recorder …',
                                        throttle_duration_sec=10.0)
             return
-        self._peer_timer.cancel()
         self.destroy_timer(self._peer_timer)
         # DDS matching is not symmetric in time: give the peers' writers/readers a moment
         # to match us too before the first (transient-local) sample goes out.
         self._peer_timer = self.create_timer(self.p['start_delay'] + 1e-3, self._start)
 
     def _start(self) -> None:
-        self._peer_timer.cancel()
         self.destroy_timer(self._peer_timer)
+        self._peer_timer = None
         self._started = True
-        self.get_logger().info(f'peers matched: starting {self.timing.value} run')
+        how = 'starting' if self.k == 0 else f'resuming at step {self.k} of'
+        self.get_logger().info(f'peers matched: {how} {self.timing.value} run')
         if self.timing is Timing.LOCKSTEP:
             self._publish_step()
         else:
-            self.mark_hot(self.create_timer(self.dt, self._on_tick))
+            self._tick_timer = self.mark_hot(self.create_timer(self.dt, self._on_tick))
 
     def _publish_step(self) -> None:
-        """Publish ``/clock`` then the measurement of step ``k`` (stamp ``k·dt``)."""
+        """Publish the measurement of step ``k`` (stamp ``k·dt``), then ``/clock``.
+
+        The measurement first: it is on the loop's critical path (the controller
+        answers it), ``/clock`` is not (the trajectory publishes the reference one
+        period ahead) — each publish costs 70–150 µs here, so this order takes one
+        publish off every step's round trip.
+        """
         t_ns = self.k * self.dt_ns
-        set_stamp(self._clock_msg.clock, t_ns)
-        self.pub_clock.publish(self._clock_msg)
         self._publish_measurement(t_ns)
+        set_stamp(self._clock_msg.clock, t_ns)
+        self._clock_out.publish(self._clock_msg)
 
     def _publish_measurement(self, t_ns: int) -> None:
         m = self.plant.measure(self.dt)
         js = self._js
         set_stamp(js.header.stamp, t_ns)
-        js.position = [m.position]
-        js.velocity = [m.velocity]
-        js.effort = [self.plant.model.input_force(self.plant.applied_command,
-                                                  self.plant.velocity)]
-        self.pub_js.publish(js)
+        # written in place: the message holds these arrays (no per-step list + setter)
+        self._pos[0] = m.position
+        self._vel[0] = m.velocity
+        self._eff[0] = self.plant.model.input_force(self.plant.applied_command,
+                                                    self.plant.velocity)
+        self._js_out.publish(js)
         self.published += 1
 
     def _command(self, u: float) -> float:
@@ -270,22 +342,40 @@ class PlantNode(ParamNode):
         """Live load changes (the rest is read-only)."""
         if {'load_force', 'load_start'} & changed.keys():
             try:
-                self.plant.load = StepLoad(new['load_force'], new['load_start'])
+                load = StepLoad(new['load_force'], new['load_start'])
             except ValueError as exc:
                 raise ParameterError(str(exc)) from None
+            if self.plant is not None:   # unconfigured: configure reads the parameters
+                self.plant.load = load
+        if 'friction_scale' in changed and self.plant is not None:
+            # same kernel layout, new friction levels; the state (GMS elements) carries on
+            P = self.plant.params
+            P[:] = pack_params(scale_friction(self._model0, new['friction_scale']),
+                               self.plant.sensors, float(P[K.P_DT]))
+            self.get_logger().info(f'friction x{new["friction_scale"]:g} from step {self.k}')
 
     def finish(self, executor: Any) -> None:
         """Make sure the last samples reached every reader, then report the count."""
         for pub in (self.pub_js, self.pub_clock):
             if pub is not None and executor is not None:
                 pub.wait_for_all_acked(Duration(seconds=2.0))
+        paced = getattr(self._js_out, 'waits', None) if self.pub_js is not None else None
         self.get_logger().info(f'stopped: {self.published} measurements published, '
-                               f'{self.k} steps, {self.refused} commands refused')
+                               f'{self.k} steps, {self.refused} commands refused'
+                               + (f', {paced} reader waits timed out' if paced else ''))
 
     @property
     def done(self) -> bool:
         """The requested duration has been simulated."""
         return self._finished
+
+
+def scale_friction(model: AxisModel, scale: float) -> AxisModel:
+    """Return ``model`` with its Coulomb, Stribeck and viscous levels times ``scale``."""
+    field = {'coulomb': 'fc', 'stribeck': 'fs', 'viscous': 'fv'}
+    return model.replace(effects=tuple(
+        e.replace(**{field[e.name]: getattr(e, field[e.name]) * scale})
+        if e.name in field else e for e in model.effects))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -34,17 +34,24 @@ the finite gains as top-level keys, so ``motor-comp compare RUN --model M.yaml``
 replay the closed loop of a ROS recording (:func:`scenario_metadata`).  They describe
 the run as it started; runtime changes are in ``parameter_changes``.
 
-Memory (``bench/soak.py --duration 200``: lockstep ball-screw, 200 000 steps, 800 000
-messages, two runs): RSS rises ≈ 0.5–1 MiB in the first ≈ 300 000 messages (allocator
-pools, DDS reader buffers, zstd context warming up), then 0.4–0.8 B per message, i.e.
-6–11 MiB per hour of 1 kHz lockstep, and drops ≈ 0.3 MiB when the file is closed.  Not
-a Python leak: with ``trace_memory`` the traced Python heap stays flat except the MCAP
-summary index that the writer must keep until it writes the summary, ≈ 310 B per
-256 KiB chunk ≈ 1.2 MiB per hour at 1 kHz; the rest is native (rmw/DDS, malloc
-fragmentation), not attributable with tracemalloc.  The "3 MiB per 10 min" of the first
-soak was mostly the warm-up counted against a short run, plus — when the recorder
-falls behind — the high-water mark of the DDS reader queue (KEEP_ALL), freed but not
-returned to the OS.  ``memory_log_interval`` logs RSS during a run.
+Memory (issue 13; ``bench/soak.py``, lockstep ball-screw, 4 messages per step).  The
+Python heap is flat (``trace_memory``: +0.0 MiB over 300 000 messages) except the MCAP
+writer's chunk index, which mcap keeps as one object per chunk (≈ 0.6 KiB each, a chunk
+per ≈ 0.7 s: 3–5 MiB per hour of recording); :class:`~motor_comp.logs.McapRecorder`
+now spills it to a temporary file, so nothing grows with the number of chunks.  RSS
+moves in steps, not a slope: in a 900 s run (3.6 M messages, every step recorded,
+machine at load ≈ 15) it rose 2.4 MiB in the first 30 k messages (start-up), one
+≈ 1 MiB step near 0.8 M messages (the control run with ``discard:=true``, without any
+MCAP writer, had a similar +0.6 MiB step at 0.5 M: native, rmw/DDS or malloc
+thresholds), then 0.14 ± 0.005
+MiB per hour of 1 kHz recording over the last 2.8 M messages.
+A lagging recorder no longer loses data or grows its DDS queues without bound: the
+lockstep plant paces itself on its readers' acknowledgements
+(:class:`~motor_comp.nodes.common.Pacer`).  ``memory_log_interval`` logs RSS during a
+run; ``discard`` is the control (same subscriptions and callbacks, no file).
+
+Lifecycle: see :class:`RecorderNode` (file opened on configure, written while active,
+finalised on deactivate, cleanup, shutdown or SIGINT/SIGTERM).
 
 Shutdown: on SIGINT/SIGTERM the node keeps taking messages until the graph has been
 quiet for ``drain_time``, then closes the file (summary and index written), so no
@@ -60,7 +67,7 @@ import struct
 import time
 import tracemalloc
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from rcl_interfaces.msg import ParameterEvent
 from rclpy.parameter import parameter_value_to_python
@@ -72,8 +79,8 @@ from std_msgs.msg import Float64
 from motor_comp.errors import InputFileError, MotorCompError
 from motor_comp.logs import McapRecorder
 from motor_comp.logs.mcap_io import METADATA_NAME
-from motor_comp.nodes.common import DEFAULT_NAMESPACE, EVENTS_QOS, Param, ParamNode, \
-    RECORD_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, Timing, \
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, EVENTS_QOS, LeanLoop, ManagedNode, \
+    Param, RECORD_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, Timing, \
     rss_mib, run_node
 
 PARAMS = (
@@ -92,6 +99,8 @@ PARAMS = (
           'log the largest growth sites at exit (slows recording about 2×)', read_only=True),
     Param('memory_log_interval', 0.0, 'Diagnostics: log RSS, traced heap and message '
           'count this often (0 = off)', 's', 0.0, 3600.0, read_only=True),
+    Param('discard', False, 'Diagnostics: subscribe and count like a recording, but '
+          'write no MCAP (the control run of a memory soak)', read_only=True),
     Param('nodes', 'plant_node,trajectory_node,controller_node',
           'Comma-separated node names (same namespace) whose parameters are stored as '
           'MCAP metadata', read_only=True),
@@ -165,22 +174,70 @@ def cdr_stamp_ns(data: bytes) -> int:
     return sec * 1_000_000_000 + nsec
 
 
-class RecorderNode(ParamNode):
-    """Writes every received message of the axis topics to one MCAP file."""
+class RecorderNode(ManagedNode):
+    """Writes every received message of the axis topics to one MCAP file.
+
+    Managed node: ``configure`` opens the file (header, channels; the other nodes'
+    parameters are stored as soon as they answer); ``activate`` subscribes the topics
+    and writes what arrives; ``deactivate`` drains what is still arriving and closes
+    the file (summary written: a complete, finalised MCAP); ``cleanup`` and
+    ``shutdown`` close it too if it is open.  Activating again after a deactivate
+    opens the next segment ``<output stem>.<n>.mcap`` (never overwriting a finished
+    file).  While not active nothing is subscribed, so the plant waits for the
+    recorder before it starts a run.
+    """
 
     def __init__(self) -> None:
         super().__init__('recorder_node', namespace=DEFAULT_NAMESPACE)
         self.declare_params(PARAMS)
         self.timing = Timing(self.p['timing'])
-        out = Path(self.p['output'])
-        if not out.parent.is_dir():
-            raise InputFileError(f'output: directory {out.parent} does not exist')
-        self.path = out
-        self.writer = McapRecorder(out, chunk_size=self.p['chunk_size'])
+        self.path = Path(self.p['output'])
+        self.writer: McapRecorder | None = None
+        self._segment = 0
+        self._closed = True
+        self._subs: dict[str, Any] = {}
+        self._js_sub = self._match_timer = self._param_timer = None
+        self._param_clients: dict[str, AsyncParameterClient] = {}
+        self.counts = collections.Counter()
         ns = self.get_namespace().rstrip('/')
         self.topics = {'reference': f'{ns}/{TOPIC_REFERENCE}',
                        'joint_states': f'{ns}/{TOPIC_JOINT_STATES}',
                        'voltage': f'{ns}/{TOPIC_VOLTAGE}', 'clock': TOPIC_CLOCK}
+        if self.timing is Timing.REALTIME or not self.p['record_clock']:
+            del self.topics['clock']   # no /clock in realtime
+        self._types = {'reference': JointState, 'joint_states': JointState,
+                       'voltage': Float64, 'clock': Clock}
+        self.create_subscription(ParameterEvent, '/parameter_events', self._on_event,
+                                 EVENTS_QOS)
+        self._mem_base = None
+        if self.p['trace_memory']:
+            tracemalloc.start(1)   # one frame: deeper tracing slows the loop ~40×
+            self._mem_timer = self.create_timer(5.0, self._memory_baseline)
+        if self.p['memory_log_interval'] > 0:
+            self.create_timer(self.p['memory_log_interval'], self._memory_sample)
+        self.autostart()
+
+    # -- lifecycle -------------------------------------------------------------------
+    def _segment_path(self) -> Path:
+        out = Path(self.p['output'])
+        if self._segment == 0:
+            return out
+        return out.with_name(f'{out.stem}.{self._segment}{out.suffix or ".mcap"}')
+
+    def configure(self) -> None:
+        """Open the output file and start storing the other nodes' parameters."""
+        self._open()
+
+    def _open(self) -> None:
+        out = self._segment_path()
+        if not out.parent.is_dir():
+            raise InputFileError(f'output: directory {out.parent} does not exist')
+        self.path = out
+        self.writer = (McapRecorder(out, chunk_size=self.p['chunk_size'])
+                       if not self.p['discard'] else _NullWriter())
+        self._closed = False
+        for key, topic in self.topics.items():
+            self.writer.add_channel(topic, _type_name(self._types[key]))
         self.counts = collections.Counter()
         self._js_stamps: collections.deque[int] = collections.deque()
         self._pending_voltage: collections.deque[bytes] = collections.deque()
@@ -189,42 +246,57 @@ class RecorderNode(ParamNode):
         self._last_volt_ns = -1
         self._early_voltage: list[tuple[int, bytes]] = []
         self._last_rx = time.monotonic()
-        self._closed = False
         self._changes: dict[str, str] = {}
-        types = {'reference': JointState, 'joint_states': JointState, 'voltage': Float64,
-                 'clock': Clock}
-        handlers = {'reference': self._on_stamped('reference'),
-                    'joint_states': self._on_joint_states, 'voltage': self._on_voltage,
-                    'clock': self._on_stamped('clock')}
-        if self.timing is Timing.REALTIME or not self.p['record_clock']:
-            del self.topics['clock']   # no /clock in realtime
-        self._subs = {}
-        for key, topic in self.topics.items():
-            self.writer.add_channel(topic, _type_name(types[key]))
-            if key != 'joint_states':
-                self._subs[key] = self.mark_hot(self.create_subscription(
-                    types[key], topic, handlers[key], RECORD_QOS, raw=True))
-        # joint_states last: the plant starts when it sees this reader, and by then the
-        # other topics' writers have matched us, so nothing of the run is missed
-        self._js_args = (types['joint_states'], self.topics['joint_states'],
-                         handlers['joint_states'])
-        self._since = time.monotonic()
-        self._match_timer = self.create_timer(0.05, self._subscribe_joint_states)
-        self.create_subscription(ParameterEvent, '/parameter_events', self._on_event,
-                                 EVENTS_QOS)
+        ns = self.get_namespace().rstrip('/')
         names = [n.strip() for n in self.p['nodes'].split(',') if n.strip()]
-        self._param_clients = {n: AsyncParameterClient(self, f'{ns}/{n}') for n in names}
+        if not self._param_clients:
+            self._param_clients = {n: AsyncParameterClient(self, f'{ns}/{n}')
+                                   for n in names}
         self._queried: set[str] = set()
         self._raw_params: dict[str, dict[str, Any]] = {}
         self._scenario_done = False
+        if self._param_timer is not None:
+            self.destroy_timer(self._param_timer)
         self._param_timer = self.create_timer(0.2, self._query_parameters)
-        self._mem_base = None
-        if self.p['trace_memory']:
-            tracemalloc.start(1)   # one frame: deeper tracing slows the loop ~40×
-            self._mem_timer = self.create_timer(5.0, self._memory_baseline)
-        if self.p['memory_log_interval'] > 0:
-            self.create_timer(self.p['memory_log_interval'], self._memory_sample)
         self.get_logger().info(f'recording {", ".join(self.topics.values())} → {out}')
+
+    def activate(self) -> None:
+        """Subscribe the topics (``joint_states`` last) and write what arrives."""
+        if self._closed:   # deactivated before: a new segment, never the finished file
+            self._segment += 1
+            self._open()
+        handlers = {'reference': self._on_stamped('reference'),
+                    'joint_states': self._on_joint_states, 'voltage': self._on_voltage,
+                    'clock': self._on_stamped('clock')}
+        for key, topic in self.topics.items():
+            if key != 'joint_states':
+                self._subs[key] = self.mark_hot(self.create_subscription(
+                    self._types[key], topic, handlers[key], RECORD_QOS, raw=True))
+        # joint_states last: the plant starts when it sees this reader, and by then the
+        # other topics' writers have matched us, so nothing of the run is missed
+        self._js_args = (self._types['joint_states'], self.topics['joint_states'],
+                         handlers['joint_states'])
+        self._since = time.monotonic()
+        self._match_timer = self.create_timer(0.05, self._subscribe_joint_states)
+
+    def deactivate(self) -> None:
+        """Stop subscribing, write what is still arriving, close the file (finalised)."""
+        if self._subs or self._js_sub is not None:
+            self._drain(LeanLoop(self).spin_once)
+        for sub in [*self._subs.values(), self._js_sub]:
+            self.destroy_hot(sub)
+        if self._match_timer is not None:
+            self.destroy_timer(self._match_timer)
+        self._subs, self._js_sub, self._match_timer = {}, None, None
+        self._close()
+
+    def cleanup(self) -> None:
+        """Close the file if it is still open; the next configure starts at ``output``."""
+        self.deactivate()
+        if self._param_timer is not None:
+            self.destroy_timer(self._param_timer)
+            self._param_timer = None
+        self._segment = 0
 
     def _subscribe_joint_states(self) -> None:
         unmatched = [k for k, sub in self._subs.items() if sub.get_publisher_count() < 1]
@@ -234,8 +306,10 @@ class RecorderNode(ParamNode):
         if unmatched:
             self.get_logger().warning(f'no publisher on {", ".join(unmatched)} after '
                                       f'{waited:.0f} s: recording without waiting')
-        self._match_timer.cancel()
-        self.mark_hot(self.create_subscription(*self._js_args, RECORD_QOS, raw=True))
+        self.destroy_timer(self._match_timer)
+        self._match_timer = None
+        self._js_sub = self.mark_hot(self.create_subscription(*self._js_args, RECORD_QOS,
+                                                              raw=True))
 
     # -- messages --------------------------------------------------------------------
     def _write(self, key: str, data: bytes, t_ns: int) -> None:
@@ -338,12 +412,15 @@ class RecorderNode(ParamNode):
     # -- diagnostics -----------------------------------------------------------------
     def _memory_baseline(self) -> None:
         self._mem_timer.cancel()
-        self._mem_base = (tracemalloc.take_snapshot(), rss_mib(), self.writer.message_count)
+        self._mem_base = (tracemalloc.take_snapshot(), rss_mib(), self._messages())
+
+    def _messages(self) -> int:
+        return self.writer.message_count if self.writer is not None else 0
 
     def _memory_sample(self) -> None:
         self.get_logger().info(f'memory: rss_mib={rss_mib():.2f} traced_mib='
                                f'{tracemalloc.get_traced_memory()[0] / 2**20:.2f} '
-                               f'messages={self.writer.message_count}')
+                               f'messages={self._messages()}')
 
     def _memory_report(self) -> None:
         """Log where the traced Python heap grew since the baseline (5 s after start)."""
@@ -354,7 +431,7 @@ class RecorderNode(ParamNode):
         diff = now.compare_to(base, 'lineno')
         total = sum(d.size_diff for d in diff)
         self.get_logger().info(
-            f'memory: {self.writer.message_count - n0} messages since baseline; RSS '
+            f'memory: {self._messages() - n0} messages since baseline; RSS '
             f'{rss0:.2f} → {rss_mib():.2f} MiB; traced Python heap +{total / 2**20:.3f} MiB')
         for d in diff[:5]:
             where = ' < '.join(f'{Path(f.filename).name}:{f.lineno}'
@@ -363,15 +440,18 @@ class RecorderNode(ParamNode):
                                    f'{d.count_diff:+d} blocks at {where}')
 
     # -- shutdown --------------------------------------------------------------------
-    def finish(self, executor: Any) -> None:
-        """Drain what is still arriving, write the run metadata, close the file."""
-        if self._closed:
-            return
+    def _drain(self, spin: Callable[[int], Any]) -> None:
+        """Take messages until the topics were quiet for ``drain_time`` (10 s at most)."""
         deadline = time.monotonic() + 10.0
         self._last_rx = time.monotonic()
-        while (executor is not None and time.monotonic() - self._last_rx < self.p['drain_time']
+        while (time.monotonic() - self._last_rx < self.p['drain_time']
                and time.monotonic() < deadline):
-            executor.spin_once(timeout_sec=0.02)
+            spin(20_000_000)
+
+    def _close(self) -> None:
+        """Write the held-back commands and the run metadata, close the file."""
+        if self._closed:
+            return
         self._flush_early_voltage(None)
         # a command without its measurement (should not happen): keep it, at the last time
         while self._pending_voltage:
@@ -387,6 +467,34 @@ class RecorderNode(ParamNode):
             self._memory_report()
         self.get_logger().info(
             f'closed {self.path}: ' + ', '.join(f'{k} {v}' for k, v in self.counts.items()))
+
+    def finish(self, executor: Any) -> None:
+        """Drain what is still arriving, write the run metadata, close the file."""
+        if self._closed:
+            return
+        if executor is not None:
+            self._drain(lambda ns: executor.spin_once(timeout_sec=ns * 1e-9))
+        self._close()
+
+
+class _NullWriter:
+    """Stands in for :class:`McapRecorder` with ``discard``: same calls, nothing kept."""
+
+    message_count = 0
+
+    def add_channel(self, topic: str, msgtype: str) -> None:
+        """Accept a channel (nothing is written)."""
+
+    def write_cdr(self, topic: str, data: bytes, log_time_ns: int,
+                  publish_time_ns: int | None = None) -> None:
+        """Count the message, drop it."""
+        self.message_count += 1
+
+    def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
+        """Drop the record."""
+
+    def close(self) -> None:
+        """Nothing to close."""
 
 
 def _type_name(cls: type) -> str:

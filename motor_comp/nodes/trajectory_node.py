@@ -25,6 +25,7 @@ trajectory (rejected with the reason if invalid) and take effect at the next tic
 """
 from __future__ import annotations
 
+import array
 import dataclasses
 from typing import Any, Mapping
 
@@ -81,7 +82,9 @@ class TrajectoryNode(ParamNode):
         self.trajectory.at(0.0)   # load the compiled evaluator before the first tick
         self.dt_ns = period_ns(self.p['control_rate'])
         self._next_k = -1
-        self._msg = JointState(name=[JOINT_NAME])
+        self._msg = JointState(name=[JOINT_NAME], position=array.array('d', [0.0]),
+                               velocity=array.array('d', [0.0]),
+                               effort=array.array('d', [0.0]))
         self._msg.header.frame_id = JOINT_NAME
         self.pub = self.create_publisher(JointState, TOPIC_REFERENCE, LOOP_QOS)
         if self.timing is Timing.LOCKSTEP:
@@ -115,9 +118,9 @@ class TrajectoryNode(ParamNode):
         ref = self.trajectory.at(t)
         msg = self._msg
         set_stamp(msg.header.stamp, stamp_ns)
-        msg.position = [ref.position]
-        msg.velocity = [ref.velocity]
-        msg.effort = [ref.acceleration]
+        msg.position[0] = ref.position   # in place: the message's own arrays
+        msg.velocity[0] = ref.velocity
+        msg.effort[0] = ref.acceleration
         self.pub.publish(msg)
 
     def _on_clock(self, msg: Clock) -> None:

@@ -9,11 +9,17 @@ damping·ẋ`` (DESIGN.md §3).  This one form covers both plants of the source 
 
 It is also the model file of the workbench (DESIGN.md §6): :meth:`AxisModel.to_dict`
 and :func:`AxisModel.from_dict` are its YAML form.
+
+Linear or rotary (``axis: linear | rotary``, DESIGN.md §6): the equations are the same;
+on a rotary axis position is an angle [rad], ``mass`` the inertia [kg·m²] and every force
+a torque [N·m].  :attr:`AxisModel.units` names the units of each quantity for reports.
 """
 from __future__ import annotations
 
 import dataclasses
 import enum
+import math
+import sys
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
@@ -22,7 +28,11 @@ import yaml
 
 from motor_comp.errors import ModelFileError, ParameterError, check_nonnegative, \
     check_positive
-from motor_comp.physics.effects import EFFECTS, VOCABULARY, Effect, EffectKind, make_effect
+from motor_comp.physics.effects import EFFECTS, VOCABULARY, AxisKind, Effect, EffectKind, \
+    make_effect
+from motor_comp.physics.effects.presliding import upgrade_legacy_params
+
+__all__ = ['AxisKind', 'AxisModel', 'InputKind', 'Units', 'effects_from', 'warn_legacy']
 
 
 class InputKind(enum.Enum):
@@ -31,6 +41,88 @@ class InputKind(enum.Enum):
     VOLTAGE = 'voltage'
     CURRENT = 'current'
     FORCE = 'force'
+
+
+@dataclasses.dataclass(frozen=True)
+class Units:
+    """Unit strings of one axis kind, for tables, reports and plots (DESIGN.md §6).
+
+    Attributes
+    ----------
+    kind : AxisKind
+        The axis kind these units belong to.
+    position, velocity, acceleration : str
+        ``m, m/s, m/s²`` or ``rad, rad/s, rad/s²``.
+    force : str
+        ``N`` or ``N·m`` (every effect force is a torque on a rotary axis).
+    mass : str
+        ``kg`` or ``kg·m²`` (the ``mass`` field is the inertia on a rotary axis).
+    viscous : str
+        ``N·s/m`` or ``N·m·s/rad`` (``viscous.fv``, ``damping``, GMS ``sigma``).
+    spring : str
+        ``N/m`` or ``N·m/rad`` (``spring.k``, GMS ``k``).
+    back_emf : str
+        ``V·s/m`` or ``V·s/rad``.
+    attraction : str
+        GMS slip attraction ``C``: ``N/s`` or ``N·m/s``.
+    """
+
+    kind: AxisKind
+    position: str
+    velocity: str
+    acceleration: str
+    force: str
+    mass: str
+    viscous: str
+    spring: str
+    back_emf: str
+    attraction: str
+
+    @classmethod
+    def of(cls, kind: AxisKind | str) -> 'Units':
+        """Units of the axis kind ``kind``."""
+        return _UNITS[AxisKind(kind)]
+
+    @property
+    def rotary(self) -> bool:
+        """Whether these are rotary units."""
+        return self.kind is AxisKind.ROTARY
+
+    def cycles_per_revolution(self, period: float) -> float | None:
+        """Ripple/cogging cycles per revolution ``2π/period`` (rotary), None (linear).
+
+        Parameters
+        ----------
+        period : float
+            Spatial period of the first harmonic [rad] on a rotary axis.
+        """
+        if not self.rotary:
+            return None
+        return 2.0 * math.pi / check_positive('ripple.period [rad]', period)
+
+    def period_text(self, period: float) -> str:
+        """Format a ripple period for reports, e.g. ``'0.02 m'`` or ``'0.785 rad (8 /rev)'``."""
+        cpr = self.cycles_per_revolution(period)
+        text = f'{period:.4g} {self.position}'
+        return text if cpr is None else f'{text} ({cpr:.4g} /rev)'
+
+    def input_gain(self, input_kind: 'InputKind | str') -> str:
+        """Return the unit of ``input_gain`` for a command kind: N/V, N/A, 1 (or N·m/V, N·m/A)."""
+        kind = InputKind(input_kind)
+        if kind is InputKind.FORCE:
+            return '1'
+        return f'{self.force}/{"V" if kind is InputKind.VOLTAGE else "A"}'
+
+
+_UNITS = {
+    AxisKind.LINEAR: Units(AxisKind.LINEAR, position='m', velocity='m/s',
+                           acceleration='m/s²', force='N', mass='kg', viscous='N·s/m',
+                           spring='N/m', back_emf='V·s/m', attraction='N/s'),
+    AxisKind.ROTARY: Units(AxisKind.ROTARY, position='rad', velocity='rad/s',
+                           acceleration='rad/s²', force='N·m', mass='kg·m²',
+                           viscous='N·m·s/rad', spring='N·m/rad', back_emf='V·s/rad',
+                           attraction='N·m/s'),
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,6 +144,11 @@ class AxisModel:
         The effects, at most one of each name, in vocabulary order.
     input : InputKind
         The kind of logged command.
+    axis : AxisKind
+        Linear (default) or rotary.  On a rotary axis read every unit above in its
+        rotary form (see :class:`Units`): inertia [kg·m²], torque [N·m], angle [rad].
+        Every effect declares the axis kinds it is valid on (``Effect.axes``); only
+        ``gravity`` is restricted (rotary only), and no effect is linear-only.
     """
 
     mass: float = 1.0
@@ -60,6 +157,7 @@ class AxisModel:
     damping: float = 0.0
     effects: tuple = ()
     input: InputKind = InputKind.VOLTAGE
+    axis: AxisKind = AxisKind.LINEAR
 
     def __post_init__(self) -> None:
         object.__setattr__(self, 'mass', check_positive('mass [kg]', self.mass))
@@ -85,6 +183,21 @@ class AxisModel:
                 raise ParameterError(
                     f'input must be one of {[k.value for k in InputKind]}, '
                     f'got {self.input!r}') from None
+        if not isinstance(self.axis, AxisKind):
+            try:
+                object.__setattr__(self, 'axis', AxisKind(self.axis))
+            except ValueError:
+                raise ParameterError(
+                    f'axis must be one of {[k.value for k in AxisKind]}, '
+                    f'got {self.axis!r}') from None
+        for e in effects:
+            if self.axis not in e.axes:
+                allowed = ' or '.join(sorted(k.value for k in e.axes))
+                hint = '; on a linear axis gravity is an offset' if e.name == 'gravity' \
+                    else ''
+                raise ParameterError(
+                    f'effect {e.name!r} is not valid on a {self.axis.value} axis '
+                    f'({allowed} only{hint})')
         st = self.get('stribeck')
         if st is not None and st.fs < self.fc:
             raise ParameterError(
@@ -121,6 +234,16 @@ class AxisModel:
         """Return a copy with some top-level fields changed."""
         return dataclasses.replace(self, **changes)
 
+    @property
+    def units(self) -> Units:
+        """Unit strings of this axis kind (m, N, kg or rad, N·m, kg·m²)."""
+        return _UNITS[self.axis]
+
+    @property
+    def rotary(self) -> bool:
+        """Whether the axis is rotary."""
+        return self.axis is AxisKind.ROTARY
+
     # -- convenience views used by controllers and the workbench -------------------
     @property
     def fc(self) -> float:
@@ -151,6 +274,7 @@ class AxisModel:
     def to_dict(self) -> dict[str, Any]:
         """Return the model-file mapping of DESIGN.md §6 (SI units)."""
         return {
+            'axis': self.axis.value,
             'input': self.input.value,
             'input_gain': float(self.input_gain),
             'back_emf': float(self.back_emf),
@@ -164,7 +288,7 @@ class AxisModel:
         """Build from a model-file mapping; errors name ``source`` and the field."""
         if not isinstance(data, Mapping):
             raise ModelFileError(f'{source}: expected a mapping at top level')
-        known = {'input', 'input_gain', 'back_emf', 'damping', 'mass', 'effects'}
+        known = {'axis', 'input', 'input_gain', 'back_emf', 'damping', 'mass', 'effects'}
         unknown = sorted(set(data) - known)
         if unknown:
             raise ModelFileError(f'{source}: unknown field {unknown[0]!r} '
@@ -175,6 +299,9 @@ class AxisModel:
         if not isinstance(effects_data, Mapping):
             raise ModelFileError(f'{source}: effects must be a mapping name -> parameters')
         try:
+            effects_data, note = upgrade_legacy_params(effects_data)
+            if note:
+                warn_legacy(f'{source}: {note}')
             effects = []
             for name, params in effects_data.items():
                 if name not in EFFECTS:
@@ -185,7 +312,8 @@ class AxisModel:
                 effects.append(make_effect(name, params))
             return cls(mass=data['mass'], input_gain=data.get('input_gain', 1.0),
                        back_emf=data.get('back_emf', 0.0), damping=data.get('damping', 0.0),
-                       effects=tuple(effects), input=data.get('input', 'voltage'))
+                       effects=tuple(effects), input=data.get('input', 'voltage'),
+                       axis=data.get('axis', 'linear'))
         except ParameterError as exc:
             raise ModelFileError(f'{source}: {exc}') from None
 
@@ -227,6 +355,8 @@ class AxisModel:
                       dt: float | None = None) -> dict[str, np.ndarray]:
         """Force [N] of each force effect along samples (x [m], v [m/s]).
 
+        On a rotary axis read torque [N·m] at angles [rad] and rates [rad/s].
+
         With ``dt`` [s] the samples are taken as a trajectory and ``presliding`` is
         simulated along it (its force then replaces coulomb + stribeck, which it
         contains); without ``dt``, presliding contributes its steady-state curve.
@@ -252,6 +382,14 @@ class AxisModel:
             out.pop('stribeck', None)
             out['presliding'] = f_gms
         return out
+
+
+def warn_legacy(message: str) -> None:
+    """Print a one-line ``motor-comp: warning:`` about a converted old parameter on stderr.
+
+    (The physics layer sits below ``motor_comp.logs``; this is the same line format.)
+    """
+    print(f'motor-comp: warning: {message}', file=sys.stderr, flush=True)
 
 
 def effects_from(items: Iterable[tuple[str, Mapping[str, Any]]]) -> tuple[Effect, ...]:

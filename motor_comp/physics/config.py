@@ -16,8 +16,9 @@ import yaml
 
 from motor_comp.errors import InputFileError, ModelFileError, ParameterError, \
     check_finite, check_nonnegative, check_positive
-from motor_comp.physics.axis import AxisModel
+from motor_comp.physics.axis import AxisKind, AxisModel, warn_legacy
 from motor_comp.physics.effects import make_effect
+from motor_comp.physics.effects.presliding import upgrade_legacy_params
 from motor_comp.physics.plant import Sensors
 
 
@@ -29,21 +30,24 @@ class PlantKind(enum.Enum):
 
 
 def pmlm_model(*, mass_kg: float, resistance_ohm: float, force_constant_N_per_A: float,
-               back_emf_V_s_per_m: float, effects: tuple = ()) -> AxisModel:
+               back_emf_V_s_per_m: float, effects: tuple = (),
+               axis: AxisKind | str = AxisKind.LINEAR) -> AxisModel:
     """PMLM voltage model (Tan 2002 eq. 1–7): ``ẍ = −a·ẋ + b·u − F/M``.
 
     ``b = k_f/(R·M)`` and ``a = k_f·k_e/(R·M)``, i.e. ``input_gain = k_f/R`` [N/V] and
-    ``back_emf = k_e`` [V·s/m] in the axis form.
+    ``back_emf = k_e`` [V·s/m] in the axis form.  With ``axis='rotary'`` the same numbers
+    are read as a rotary motor (kg·m², N·m/A, V·s/rad).
     """
     r = check_positive('resistance_ohm', resistance_ohm)
     kf = check_positive('force_constant_N_per_A', force_constant_N_per_A)
     return AxisModel(mass=mass_kg, input_gain=kf / r,
                      back_emf=check_nonnegative('back_emf_V_s_per_m', back_emf_V_s_per_m),
-                     effects=tuple(effects))
+                     effects=tuple(effects), axis=axis)
 
 
 def ballscrew_model(*, A_m_per_V_s2: float, B_per_s: float, C_per_s2: float,
-                    force_constant_N_per_V: float, effects: tuple = ()) -> AxisModel:
+                    force_constant_N_per_V: float, effects: tuple = (),
+                    axis: AxisKind | str = AxisKind.LINEAR) -> AxisModel:
     """Ball-screw model (Chiew eq. 1): ``ẍ = A·u(t−τ) − B·ẋ − C·x − (A/k_f)·F``.
 
     In the axis form ``M = k_f/A`` [kg], ``input_gain = k_f`` [N/V], ``damping = B·M``
@@ -60,7 +64,8 @@ def ballscrew_model(*, A_m_per_V_s2: float, B_per_s: float, C_per_s2: float,
             raise ParameterError('C_per_s2 and a spring effect both set the stiffness')
         effects += (make_effect('spring', {'k': c * mass}),)
     return AxisModel(mass=mass, input_gain=kf,
-                     damping=check_nonnegative('B_per_s', B_per_s) * mass, effects=effects)
+                     damping=check_nonnegative('B_per_s', B_per_s) * mass, effects=effects,
+                     axis=axis)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,7 +85,7 @@ class PlantConfig:
 
 
 #: the keys of a plant file and of its sections (a typo must not fall back to a default)
-_PLANT_KEYS = ('plant', 'motor', 'effects', 'sensors', 'rates')
+_PLANT_KEYS = ('plant', 'axis', 'motor', 'effects', 'sensors', 'rates')
 _SECTION_KEYS = {'sensors': ('encoder_resolution_m', 'noise_std_m', 'saturation_V'),
                  'rates': ('physics_hz', 'control_hz')}
 
@@ -112,13 +117,16 @@ def plant_from_dict(data: Mapping[str, Any], *, source: str = 'plant') -> PlantC
                              f'{[k.value for k in PlantKind]}, got {data.get("plant")!r}') \
             from None
     try:
-        effects = tuple(make_effect(n, p) for n, p in
-                        _section(data, 'effects', source).items())
+        effects_data, note = upgrade_legacy_params(_section(data, 'effects', source))
+        if note:
+            warn_legacy(f'{source}: {note}')
+        effects = tuple(make_effect(n, p) for n, p in effects_data.items())
         motor = dict(_section(data, 'motor', source))
+        axis = data.get('axis', 'linear')
         if kind is PlantKind.PMLM:
-            model = pmlm_model(effects=effects, **motor)
+            model = pmlm_model(effects=effects, axis=axis, **motor)
         else:
-            model = ballscrew_model(effects=effects, **motor)
+            model = ballscrew_model(effects=effects, axis=axis, **motor)
         sens = _section(data, 'sensors', source)
         sensors = Sensors(encoder_resolution=sens.get('encoder_resolution_m', 1e-6),
                           noise_std=sens.get('noise_std_m', 0.0),

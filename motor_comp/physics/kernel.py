@@ -7,7 +7,9 @@ parameter vector ``P`` and mutates a state vector ``S`` (layouts below, built by
 :mod:`motor_comp.physics.plant`); the force laws are the effect modules' own functions.
 
 Integration (DESIGN.md §3): the smooth part by classical RK4 with the friction
-direction frozen over the step; GMS elements updated exactly per step; Coulomb/Stribeck
+direction frozen over the step; GMS elements updated exactly per step (the published
+slip law of Lampaert 2003, relaxation rate ``C/|s(v)|``; sticking elements act inside the
+RK4 stages as springs with their micro-damping ``σ_i``); Coulomb/Stribeck
 stick–slip by a Karnopp-style switch — an axis at rest stays at rest while the net drive
 force lies inside the break-away band.  A velocity zero-crossing inside a step is an
 event: the step is integrated up to it, and the rest of the step is spent at rest or, if
@@ -33,7 +35,8 @@ import numpy as np
 from numba import njit
 
 from motor_comp.physics.effects.backlash import play
-from motor_comp.physics.effects.presliding import MAX_ELEMENTS, gms_step
+from motor_comp.physics.effects.gravity import gravity_torque
+from motor_comp.physics.effects.presliding import MAX_ELEMENTS, gms_slip_rate, gms_step
 from motor_comp.physics.effects.ripple import MAX_HARMONICS, ripple_sum
 from motor_comp.physics.effects.stribeck import stribeck_level
 
@@ -49,10 +52,11 @@ _INLINE = dict(_JIT, inline='always')
 P_MASS, P_GAIN, P_BEMF, P_DAMP = 0, 1, 2, 3
 P_FC, P_FS, P_VS, P_DELTA, P_FV = 4, 5, 6, 7, 8
 P_DFC, P_DFV = 9, 10
-P_GMS_ON, P_GMS_N, P_GMS_C = 11, 12, 13
+P_GMS_ON, P_GMS_N, P_GMS_C = 11, 12, 13   # GMS on, element count, attraction C [N/s]
 P_GMS_ALPHA = 14
-P_GMS_K = P_GMS_ALPHA + MAX_ELEMENTS
-P_RIP_NH = P_GMS_K + MAX_ELEMENTS
+P_GMS_K = P_GMS_ALPHA + MAX_ELEMENTS      # element stiffnesses [N/m]
+P_GMS_SIGMA = P_GMS_K + MAX_ELEMENTS      # element micro-damping [N·s/m]
+P_RIP_NH = P_GMS_SIGMA + MAX_ELEMENTS
 P_RIP_PERIOD = P_RIP_NH + 1
 P_RIP_A = P_RIP_PERIOD + 1
 P_RIP_B = P_RIP_A + MAX_HARMONICS
@@ -63,7 +67,8 @@ P_BACKLASH = P_F0 + 4
 P_UMAX = P_F0 + 5                 # command saturation [V]; inf = none
 P_QUANT = P_F0 + 6                # encoder resolution [m]; 0 = ideal
 P_DT = P_F0 + 7                   # physics step [s]
-P_SIZE = P_F0 + 8
+P_GRAV_MGL, P_GRAV_Q0 = P_F0 + 8, P_F0 + 9   # gravity mgl [N·m], q0 [rad]; mgl 0 = none
+P_SIZE = P_F0 + 10
 
 # _axis below unpacks the ripple amplitudes as 16-tuples
 assert MAX_HARMONICS == 16, 'update _axis() for the new MAX_HARMONICS'
@@ -83,7 +88,7 @@ S_BASE = S_DBUF
 #: by value, so the inner step functions touch no array); names as the P layout.
 _Axis = namedtuple('_Axis', (
     'gain', 'bemf', 'c_v', 'inv_mass', 'fc', 'fs', 'inv_vs', 'delta', 'half_dfc', 'half_dfv',
-    'nh', 'period', 'ra', 'rb', 'f0', 'k_spring', 'x0_spring', 'gms', 'dt'))
+    'nh', 'period', 'ra', 'rb', 'f0', 'k_spring', 'x0_spring', 'gms', 'dt', 'mgl', 'q0'))
 
 
 @njit(**_INLINE)
@@ -99,20 +104,31 @@ def _axis(P):
     return _Axis(P[P_GAIN], P[P_BEMF], P[P_DAMP] + P[P_FV], 1.0 / P[P_MASS], P[P_FC],
                  P[P_FS], 1.0 / P[P_VS], P[P_DELTA], 0.5 * P[P_DFC], 0.5 * P[P_DFV],
                  int(P[P_RIP_NH]), P[P_RIP_PERIOD], ra, rb, P[P_F0], P[P_SPRING_K],
-                 P[P_SPRING_X0], P[P_GMS_ON] > 0.5, P[P_DT])
+                 P[P_SPRING_X0], P[P_GMS_ON] > 0.5, P[P_DT], P[P_GRAV_MGL], P[P_GRAV_Q0])
 
 
 @njit(**_INLINE)
 def _ripple(A, x):
-    """Ripple force [N] at ``x`` [m] (0 without the effect)."""
+    """Position-periodic force [N] at ``x`` [m]: ripple plus gravity (0 without both).
+
+    Gravity ``mgl·sin(x − q0)`` (rotary axes) is evaluated here, with the ripple, rather
+    than in :func:`_drive_force`: like the ripple, its value at the step's start is
+    reused for RK4 stage 1, and an axis without it pays one comparison (a branch in the
+    stage loop cost ~10 % of a PMLM step).  ``S_RIPPLE`` stores the ripple share alone.
+    """
+    if A.mgl == 0.0:
+        if A.nh > 0:
+            return ripple_sum(x, A.period, A.ra, 0, A.rb, 0, A.nh)
+        return 0.0
+    f = gravity_torque(x, A.mgl, A.q0)
     if A.nh > 0:
-        return ripple_sum(x, A.period, A.ra, 0, A.rb, 0, A.nh)
-    return 0.0
+        f += ripple_sum(x, A.period, A.ra, 0, A.rb, 0, A.nh)
+    return f
 
 
 @njit(**_INLINE)
 def _drive_force(A, x, v, u, f_ext, rip):
-    """Every force except friction [N], given the ripple ``rip`` [N] at ``x``."""
+    """Every force except friction [N], given ripple + gravity ``rip`` [N] at ``x``."""
     f = A.gain * (u - A.bemf * v) - A.c_v * v
     f -= rip
     f -= A.f0 + A.k_spring * (x - A.x0_spring) + f_ext
@@ -146,20 +162,22 @@ def _breakaway(A, x, u, f_ext, rip):
 
 
 @njit(**_INLINE)
-def _friction_at(A, v, d, x, x0, gms_force, k_stick):
+def _friction_at(A, v, d, x, x0, gms_force, k_stick, c_stick):
     """Friction [N] inside a step: static model in frozen direction ``d``, or GMS.
 
-    GMS elements that stick act as springs during the step (``gms_force + k_stick·(x−x0)``);
-    treating them as a frozen force instead would make the explicit scheme pump energy
-    into the pre-sliding oscillation.
+    GMS elements that stick act as springs with their micro-damping during the step
+    (``gms_force + k_stick·(x−x0) + c_stick·v``: ``ż_i = v`` while sticking); treating them
+    as a frozen force instead would make the explicit scheme pump energy into the
+    pre-sliding oscillation.  ``gms_force`` holds the spring forces and the (frozen)
+    micro-damping of the slipping elements at the step's start.
     """
     if A.gms:
-        return gms_force + k_stick * (x - x0)
+        return gms_force + k_stick * (x - x0) + c_stick * v
     return _sliding_friction(A, v, d)
 
 
 @njit(**_INLINE)
-def _rk4_frozen(A, x, v, u, f_ext, d, gms_force, k_stick, dt, rip):
+def _rk4_frozen(A, x, v, u, f_ext, d, gms_force, k_stick, c_stick, dt, rip):
     """RK4 step of (x, v) with the friction direction ``d`` or the GMS state frozen.
 
     ``rip`` is the ripple force at the start ``x``, which the caller already has.  The
@@ -177,7 +195,7 @@ def _rk4_frozen(A, x, v, u, f_ext, d, gms_force, k_stick, dt, rip):
     for stage in range(4):
         if stage > 0:
             r = _ripple(A, xs)
-        f = _friction_at(A, vs, d, xs, x, gms_force, k_stick)
+        f = _friction_at(A, vs, d, xs, x, gms_force, k_stick, c_stick)
         a = (_drive_force(A, xs, vs, u, f_ext, r) - f) * A.inv_mass
         w = 1.0 if stage == 0 or stage == 3 else 2.0
         sum_x += w * vs
@@ -215,8 +233,8 @@ def _static_friction_step(A, x, v, u, f_ext, dt, rip):
             if d == 0.0:          # static friction balances the net force
                 return x, 0.0, (impulse + f_net * t_left) / dt, 1.0
         # one call site for both spans keeps a single inlined copy of the RK4 stages
-        xn, vn, f = _rk4_frozen(A, x, v, u, f_ext, d, 0.0, 0.0, tc if event else t_left,
-                                rip)
+        xn, vn, f = _rk4_frozen(A, x, v, u, f_ext, d, 0.0, 0.0, 0.0,
+                                tc if event else t_left, rip)
         if not event:
             if vn * d > 0.0:
                 return xn, vn, (impulse + f * t_left) / dt, 0.0
@@ -281,7 +299,7 @@ def plant_advance(P, S, u, f_ext, n_sub):
     n0 = int(np.floor(steps))
     frac = steps - n0
     n_gms = int(P[P_GMS_N])
-    decay = np.exp(-P[P_GMS_C] * dt) if A.gms else 0.0
+    attraction = P[P_GMS_C]
     width = P[P_BACKLASH]
     x = S[S_X]
     v = S[S_V]
@@ -291,22 +309,33 @@ def plant_advance(P, S, u, f_ext, n_sub):
     f_fric = S[S_FRICTION]
     ueff = u
     rip = _ripple(A, x)           # ripple at the step's start: stage 1 of every RK4 step
+    # s(v) at the step's start (the end of the previous step): rate of slipping elements
+    s_v = _sliding_friction(A, v, np.sign(v)) if A.gms else 0.0
     for _ in range(n_sub):
         if delayed:
             ueff = _delayed_command(S, u, nbuf, n0, frac)
         if A.gms:
             f_gms = 0.0
             k_stick = 0.0
+            c_stick = 0.0
             for i in range(n_gms):
-                f_gms += S[S_GMS_F + i]
+                fi = S[S_GMS_F + i]
+                f_gms += fi
                 if S[S_GMS_SLIP + i] == 0.0:
                     k_stick += P[P_GMS_K + i]
-            xn, vn, _ = _rk4_frozen(A, x, v, ueff, f_ext, 0.0, f_gms, k_stick, dt, rip)
+                    c_stick += P[P_GMS_SIGMA + i]
+                elif P[P_GMS_SIGMA + i] != 0.0:
+                    # micro-damping of a slipping element, σ_i·ż_i = σ_i·Ḟ_i/k_i, frozen
+                    # at the step's start (Ḟ_i from the published slip law)
+                    f_gms += P[P_GMS_SIGMA + i] / P[P_GMS_K + i] * gms_slip_rate(
+                        fi, P[P_GMS_ALPHA + i], attraction, s_v)
+            xn, vn, _ = _rk4_frozen(A, x, v, ueff, f_ext, 0.0, f_gms, k_stick, c_stick, dt,
+                                    rip)
             # the elements follow the direction-dependent Stribeck curve (fc±, fs± of the
             # asymmetry effect), so asymmetry acts on the dynamics, not only on the report
             s_v = _sliding_friction(A, vn, np.sign(vn))
-            f_fric = gms_step(S, S_GMS_F, S, S_GMS_SLIP, P, P_GMS_ALPHA, P, P_GMS_K, n_gms,
-                              decay, xn - x, vn, s_v)
+            f_fric = gms_step(S, S_GMS_F, S, S_GMS_SLIP, P, P_GMS_ALPHA, P, P_GMS_K,
+                              P, P_GMS_SIGMA, n_gms, attraction, dt, xn - x, vn, s_v)
         else:
             xn, vn, f_fric, stuck = _static_friction_step(A, x, v, ueff, f_ext, dt, rip)
         if xn != x:
@@ -321,6 +350,8 @@ def plant_advance(P, S, u, f_ext, n_sub):
     S[S_T] = t
     S[S_STUCK] = stuck
     S[S_FRICTION] = f_fric
+    if A.mgl != 0.0:              # the report is the ripple alone
+        rip -= gravity_torque(x, A.mgl, A.q0)
     S[S_RIPPLE] = rip
     S[S_UEFF] = ueff
 

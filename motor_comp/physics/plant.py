@@ -4,6 +4,7 @@
 and exposes the step functions both drivers use (the in-process simulator and the ROS
 ``plant_node``).  Sensor and actuator imperfections that are not forces live here:
 encoder quantisation [m], measurement noise [m], command saturation [V], external load.
+On a rotary axis (``AxisModel.axis``) read rad for m and N·m for N throughout.
 """
 from __future__ import annotations
 
@@ -95,9 +96,10 @@ def pack_params(model: AxisModel, sensors: Sensors, dt: float) -> np.ndarray:
         n = len(gms.alpha)
         P[K.P_GMS_ON] = 1.0
         P[K.P_GMS_N] = n
-        P[K.P_GMS_C] = gms.c
+        P[K.P_GMS_C] = gms.C
         P[K.P_GMS_ALPHA:K.P_GMS_ALPHA + n] = gms.alpha
         P[K.P_GMS_K:K.P_GMS_K + n] = gms.k
+        P[K.P_GMS_SIGMA:K.P_GMS_SIGMA + n] = gms.sigma
     rip = model.get('ripple')
     if rip is not None:
         nh = len(rip.harmonics)
@@ -119,10 +121,53 @@ def pack_params(model: AxisModel, sensors: Sensors, dt: float) -> np.ndarray:
     bl = model.get('backlash')
     if bl is not None:
         P[K.P_BACKLASH] = bl.width
+    grav = model.get('gravity')
+    if grav is not None:
+        P[K.P_GRAV_MGL], P[K.P_GRAV_Q0] = grav.mgl, grav.q0
     P[K.P_UMAX] = sensors.saturation
     P[K.P_QUANT] = sensors.encoder_resolution
     P[K.P_DT] = dt
     return P
+
+
+def _rk4_gain(z: complex) -> float:
+    """|R(z)| of classical RK4, ``R(z) = 1 + z + z²/2 + z³/6 + z⁴/24``."""
+    return abs(1.0 + z * (1.0 + z / 2.0 * (1.0 + z / 3.0 * (1.0 + z / 4.0))))
+
+
+def stiffest_modes(model: AxisModel) -> np.ndarray:
+    """Eigenvalues [1/s] of the axis linearised at rest with every GMS element stuck.
+
+    ``M·ẍ + D·ẋ + K·x = 0`` with ``K = Σk_i (GMS) + spring.k`` [N/m] and
+    ``D = damping + fv + Σσ_i + input_gain·back_emf`` [N·s/m]: the fastest motion the
+    explicit RK4 step must resolve (the pre-sliding resonance and its micro-damping).
+    """
+    gms = model.get('presliding')
+    spr = model.get('spring')
+    k = (gms.stiffness if gms is not None else 0.0) + (spr.k if spr is not None else 0.0)
+    d = model.damping + model.fv + model.input_gain * model.back_emf + (
+        sum(gms.sigma) if gms is not None else 0.0)
+    return np.roots([model.mass, d, k]) if k != 0.0 else np.array([-d / model.mass])
+
+
+def check_step_stable(model: AxisModel, physics_rate: float) -> None:
+    """Raise :class:`ParameterError` if RK4 at ``physics_rate`` [Hz] cannot hold the axis.
+
+    The check is on the decaying :func:`stiffest_modes` (a growing one, e.g. of a
+    negative spring, is the physics, not the integrator); the message names the rate
+    that would do.
+    """
+    modes = [lam for lam in stiffest_modes(model) if lam.real <= 0.0]
+    if all(_rk4_gain(lam / physics_rate) <= 1.0 + 1e-12 for lam in modes):
+        return
+    rate = physics_rate
+    while not all(_rk4_gain(lam / rate) <= 1.0 + 1e-12 for lam in modes):
+        rate *= 1.25
+    fast = max(abs(lam) for lam in modes)
+    raise ParameterError(
+        f'physics_rate [Hz] {physics_rate:g} is too low for this axis: its stiffest mode '
+        f'at rest (|λ| = {fast:.4g} 1/s, from GMS k/sigma, spring, damping and mass) '
+        f'makes the RK4 step unstable; use physics_rate >= {math.ceil(rate):d} Hz')
 
 
 def initial_state(P: np.ndarray, x0: float = 0.0) -> np.ndarray:
@@ -170,6 +215,7 @@ class Plant:
         physics_rate = check_positive('physics_rate [Hz]', physics_rate)
         if physics_rate < 1000.0:
             raise ParameterError(f'physics_rate [Hz] must be >= 1000, got {physics_rate:g}')
+        check_step_stable(model, physics_rate)
         self.model = model
         self.sensors = sensors or Sensors()
         self.physics_rate = physics_rate

@@ -377,9 +377,13 @@ def fit_stribeck(ctx: FitContext, train: np.ndarray,
 
 
 # -- presliding --------------------------------------------------------------------
-def gms_effect(stiffness: float, c: float) -> Presliding:
-    """Chiew's 4-element GMS shape scaled to a total stiffness [N/m] and slip rate [1/s]."""
-    return Presliding(alpha=GMS_ALPHA, k=tuple(s * stiffness for s in GMS_K_SHAPE), c=c)
+def gms_effect(stiffness: float, c: float, fc: float = 1.0) -> Presliding:
+    """Chiew's 4-element GMS shape: total stiffness [N/m], slip rate ``c`` [1/s] at ``fc``.
+
+    ``c`` is the relaxation rate at sliding speeds (|s| = fc): attraction ``C = c·fc``.
+    """
+    return Presliding(alpha=GMS_ALPHA, k=tuple(s * stiffness for s in GMS_K_SHAPE),
+                      C=c * max(fc, 1e-9))
 
 
 def fit_presliding(ctx: FitContext, train: np.ndarray,
@@ -392,7 +396,7 @@ def fit_presliding(ctx: FitContext, train: np.ndarray,
     fc, fs, vs, delta = ctx.model.stribeck_curve_params()
 
     def predicted(log_k: float, log_c: float) -> np.ndarray:
-        eff = gms_effect(float(np.exp(log_k)), float(np.exp(log_c)))
+        eff = gms_effect(float(np.exp(log_k)), float(np.exp(log_c)), fc)
         f = eff.force_along(res.x, kin.dt, fc=fc, fs=fs, vs=vs, delta=delta)
         # the GMS force replaces the static curve: the change is what it explains
         return kin.smooth(f) - static
@@ -418,9 +422,10 @@ def fit_presliding(ctx: FitContext, train: np.ndarray,
                             'maxiter': 30 if start is not None else 60})
     lk = float(np.clip(opt.x[0], np.log(1e2), np.log(1e10)))
     lc = float(np.clip(opt.x[1], np.log(1.0), np.log(1e6)))
-    eff = gms_effect(float(np.exp(lk)), float(np.exp(lc)))
+    eff = gms_effect(float(np.exp(lk)), float(np.exp(lc)), fc)
     return CandidateFit('presliding', eff.params(),
-                        {'stiffness': eff.stiffness, 'c': eff.c}, predicted(lk, lc), 2,
+                        {'stiffness': eff.stiffness, 'c': float(np.exp(lc))},
+                        predicted(lk, lc), 2,
                         ctx.model.with_effect(eff))
 
 

@@ -220,6 +220,21 @@ def _literal(text: Any) -> Any:
         return text
 
 
+def _nominal_spec(text: Any) -> Any:
+    """Factors of a recorded ``nominal of … (mass_factor=1.2, …)`` tag; None = default."""
+    if not isinstance(text, str) or '(' not in text:
+        return None
+    from motor_comp.control.nominal import NominalSpec
+    factors = {}
+    for item in text[text.rfind('(') + 1:].rstrip(')').split(','):
+        key, _, value = item.strip().partition('=')
+        factors[key] = value
+    try:
+        return NominalSpec.preset('exact').replace(**factors)
+    except MotorCompError:
+        return None
+
+
 def replay(run: Run, model: AxisModel) -> tuple[Replay | None, str]:
     """Re-run the closed loop recorded in ``run``'s metadata with ``model`` as the plant.
 
@@ -234,17 +249,21 @@ def replay(run: Run, model: AxisModel) -> tuple[Replay | None, str]:
         from motor_comp.control import simulator as sim_mod
         from motor_comp.control.controller import default_params, make_controller, \
             ControlMode
+        from motor_comp.control.nominal import derive_nominal
         from motor_comp.control.trajectories import trajectory_from_dict
         from motor_comp.physics.config import load_plant
     except ImportError as exc:
         return None, f'not available (control package: {exc})'
     try:
-        cfg = load_plant(str(meta['plant'])).with_model(model)
+        recorded = load_plant(str(meta['plant']))
+        cfg = recorded.with_model(model)
+        # the controller knew the recorded run's nominal model, not the candidate model
+        nominal = derive_nominal(recorded, _nominal_spec(meta.get('nominal')))
         mode = ControlMode.parse(str(meta['controller']))
-        names = set(default_params(mode, cfg).as_dict())
+        names = set(default_params(mode, nominal).as_dict())
         params = {k: _literal(meta[k]) for k in names if k in meta}
         ff = str(meta.get('feedforward', 'none'))
-        ctrl = make_controller(mode, plant=cfg, feedforward=ff, **params)
+        ctrl = make_controller(mode, plant=nominal, feedforward=ff, **params)
         traj = trajectory_from_dict(dict(_literal(meta['trajectory'])))
         duration = len(run) / float(_literal(meta.get('control_rate_hz', 1.0 / np.median(
             np.diff(run.t)))))

@@ -1,266 +1,275 @@
-"""Add effects to a model and refit all its parameters on a run; ``--auto`` loop.
+"""Refit a model, add effects to it, or build it from ``effects: {}`` (``--auto``).
 
-The refit is the robotics inverse-model identification (``F_in = M·ẍ + Σ θ_j·φ_j``):
-with the nonlinear parameters held (ripple period, Stribeck ``vs``/``δ``, delay, GMS
-stiffness and rate, backlash width — taken from the candidate search), every parameter
-that enters linearly is re-estimated jointly by least squares on the smoothed
-regressors of the effect modules: the mass, ``fc``, ``fv``, ``fs − fc``, the ripple
-amplitudes, ``f0``, the spring, the asymmetry, and a common scale of the GMS force.
-``input_gain``, ``back_emf`` and ``damping`` stay fixed (they are the drive's data;
-``damping`` and ``back_emf`` are collinear with ``fv``).
+Every fit is the joint inverse-dynamic-model least squares of
+:mod:`~motor_comp.workbench.ident`: the mass/inertia and every coefficient that enters
+linearly are re-estimated together each time the effect set changes, the nonlinear
+parameters by variable projection.  ``input_gain``, ``back_emf`` and ``damping`` stay
+fixed (the drive's data: a gain error scales every force and is reported by
+``diagnose`` as such).
 
-Held-out errors: each fit is repeated with one contiguous time block left out, and the
-force NRMSE is evaluated on that block (the same blocks as :mod:`.diagnose`).
+``--auto`` is stepwise selection with a way back (``../shared/IDENTIFICATION.md`` §3):
+H0 is the starting model refitted; the forward step adds the candidate with the
+largest held-out gain if it pays (held-out gain, NRMSE drop and BIC, as in
+:mod:`.diagnose`); the backward step then drops every effect whose removal no longer
+hurts (a step with ``action: "remove"``).  Held-out errors come from the interleaved
+hv-block folds of :class:`~motor_comp.workbench.ident.Data`.
 """
 from __future__ import annotations
 
 import dataclasses
 from typing import Any, Callable, Sequence
 
-import numpy as np
-
 from motor_comp.errors import ParameterError
 from motor_comp.physics.axis import AxisModel
-from motor_comp.physics.effects import Asymmetry, Coulomb, Offset, Ripple, Spring, \
-    Stribeck, Viscous
-from motor_comp.workbench.candidates import FITTERS, MASS, FitContext, \
-    available_candidates
+from motor_comp.workbench import ident as idm
 from motor_comp.workbench.derivatives import Kinematics
-from motor_comp.workbench.diagnose import diagnose, fold_masks
-from motor_comp.workbench.residual import force_nrmse, residual
-
-
-def refit_linear(kin: Kinematics, model: AxisModel, train: np.ndarray | None = None) \
-        -> AxisModel:
-    """Joint least-squares refit of every linear parameter of ``model`` (see module doc)."""
-    res = residual(kin, model)
-    rows = res.mask if train is None else (train & res.mask)
-    x, v = res.x, res.v
-    cols: list[np.ndarray] = [res.a[:, None]]
-    slots: list[tuple[str, int]] = [(MASS, 1)]
-    gms = model.has('presliding')
-    for e in model.effects:
-        n = e.name
-        if n in ('coulomb', 'stribeck') and gms:
-            continue   # carried by the GMS elements, scaled through their column
-        if n == 'presliding':
-            c = res.forces['presliding'][:, None]
-        elif n == 'offset':
-            c = np.ones((len(kin), 1))
-        elif n == 'spring':
-            c = kin.smooth(e.regressors(x))
-            if model.has('offset'):
-                c = c[:, :1]   # the constant belongs to the offset
-        elif n in ('coulomb', 'viscous', 'stribeck', 'ripple', 'asymmetry'):
-            c = kin.smooth(e.regressors(x, v))
-        else:
-            continue   # delay, backlash: nonlinear only
-        cols.append(c)
-        slots.append((n, c.shape[1]))
-    X = np.concatenate(cols, axis=1)
-    theta, *_ = np.linalg.lstsq(X[rows], res.f_in[rows], rcond=None)
-    if not 0.1 * model.mass <= theta[0] <= 10.0 * model.mass:
-        # the run does not excite the inertia (e.g. constant speed): an estimate an
-        # order of magnitude off is noise, so the mass is kept and the rest refit
-        rest, *_ = np.linalg.lstsq(X[rows][:, 1:], (res.f_in - res.inertia)[rows],
-                                   rcond=None)
-        theta = np.concatenate([[model.mass], rest])
-    coef: dict[str, np.ndarray] = {}
-    i = 0
-    for name, w in slots:
-        coef[name] = theta[i:i + w]
-        i += w
-    out = model.replace(mass=max(float(coef[MASS][0]), 1e-3 * model.mass))
-    fc_new = max(float(coef['coulomb'][0]), 0.0) if 'coulomb' in coef else model.fc
-    for e in model.effects:
-        n = e.name
-        if n not in coef and n != 'stribeck':
-            continue
-        c = coef.get(n)
-        if n == 'coulomb':
-            new = Coulomb(fc=fc_new)
-        elif n == 'viscous':
-            new = Viscous(fv=max(float(c[0]), 0.0))
-        elif n == 'stribeck':
-            if c is None:       # scaled with the GMS below
-                continue
-            new = Stribeck(fs=fc_new + max(float(c[0]), 0.0), vs=e.vs, delta=e.delta)
-        elif n == 'presliding':
-            scale = max(float(c[0]), 1e-3)
-            cou, st = model.get('coulomb'), model.get('stribeck')
-            if cou is not None:
-                out = out.with_effect(Coulomb(fc=cou.fc * scale))
-            if st is not None:
-                out = out.with_effect(Stribeck(fs=st.fs * scale, vs=st.vs, delta=st.delta))
-            continue
-        elif n == 'ripple':
-            new = Ripple(period=e.period, harmonics=tuple(
-                (float(c[2 * h]), float(c[2 * h + 1])) for h in range(len(c) // 2)))
-        elif n == 'offset':
-            f0 = float(c[0])
-            if 'spring' in coef:
-                sp = model.get('spring')
-                f0 += float(coef['spring'][0]) * sp.x0
-            new = Offset(f0=f0)
-        elif n == 'spring':
-            k = float(c[0])
-            if len(c) > 1 and abs(k) > 0:
-                x0 = float(np.clip(-float(c[1]) / k, -1e3, 1e3))
-            else:
-                x0 = e.x0
-            new = Spring(k=k, x0=x0)
-        elif n == 'asymmetry':
-            new = Asymmetry(dfc=float(c[0]), dfv=float(c[1]))
-        else:
-            continue
-        out = out.with_effect(new)
-    return out
-
-
-def add_effects(kin: Kinematics, model: AxisModel, names: Sequence[str],
-                train: np.ndarray | None = None) -> AxisModel:
-    """``model`` with the named effects added (nonlinear parameters searched), all refit."""
-    for name in names:
-        _check_addable(model, name)
-        res = residual(kin, model)
-        rows = res.mask if train is None else train & res.mask
-        model = FITTERS[name](FitContext(kin=kin, model=model, res=res), rows).model
-    return refit_linear(kin, model, train)
-
-
-def heldout_nrmse(kin: Kinematics, procedure: Callable[[np.ndarray | None], AxisModel], *,
-                  mask: np.ndarray, folds: int = 5) -> float:
-    """Force NRMSE of ``procedure(train)`` on the blocks it did not see."""
-    num = 0.0
-    r_all = []
-    f_all = []
-    for held in fold_masks(mask, folds):
-        m = procedure(mask & ~held)
-        res = residual(kin, m, mask=mask)
-        r_all.append(res.r[held])
-        f_all.append(res.f_in[held])
-    r = np.concatenate(r_all)
-    num = force_nrmse(r, np.concatenate(f_all))
-    return num
+from motor_comp.workbench.diagnose import MASS, REFIT, Engine, as_list, available, \
+    common_scale, experiment_notes, fmt_param, identifiability_notes, model_scalars, \
+    scale_forces, significant_changes
 
 
 @dataclasses.dataclass(frozen=True)
 class FitStep:
-    """One step of a fit: the effect added (None = starting model) and its errors."""
+    """One step: the effect added/removed (None = starting model) and its held-out error."""
 
     effect: str | None
     force_nrmse: float
     model: AxisModel
     summary: str = ''
+    action: str = 'add'
 
     def as_dict(self) -> dict[str, Any]:
         """JSON form (DESIGN.md §6 ``steps`` entry)."""
-        return {'effect': self.effect, 'force_nrmse': float(self.force_nrmse),
-                'summary': self.summary}
+        return {'effect': self.effect, 'action': self.action,
+                'force_nrmse': float(self.force_nrmse), 'summary': self.summary}
 
 
 @dataclasses.dataclass(frozen=True)
 class FitResult:
-    """Steps from the starting model to the fitted one."""
+    """Steps from the starting model to the fitted one, with uncertainties."""
 
     steps: tuple
     model: AxisModel
+    uncertainty: dict = dataclasses.field(default_factory=dict)
+    identifiability: tuple = ()
+    experiment: tuple = ()
+    at_bound: dict = dataclasses.field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON form of DESIGN.md §6 (``steps``, ``model``)."""
-        return {'steps': [s.as_dict() for s in self.steps], 'model': self.model.to_dict()}
+        """JSON form of DESIGN.md §6 (``steps``, ``model``, ``uncertainty``, notes)."""
+        return {'steps': [s.as_dict() for s in self.steps], 'model': self.model.to_dict(),
+                'uncertainty': self.uncertainty,
+                'identifiability': list(self.identifiability),
+                'experiment': list(self.experiment), 'at_bound': self.at_bound}
 
 
-def _check_addable(model: AxisModel, name: str) -> None:
-    """Raise :class:`ParameterError` if effect ``name`` cannot be added to ``model``."""
-    if name != MASS and model.has(name):
-        raise ParameterError(f'the model already has {name!r}; it is refit anyway')
-    if name not in available_candidates(model):
-        raise ParameterError(
-            f'cannot add {name!r} to this model'
-            + (' (add coulomb first)' if name in ('stribeck', 'presliding') else ''))
-
-
-def _check_add_list(model: AxisModel, names: Sequence[str]) -> None:
-    """Check a whole ``add`` list before any fitting, effect by effect in order.
-
-    The rules of :func:`available_candidates` (no duplicates, coulomb before stribeck
-    and presliding) applied to the names alone, so that a bad list fails at once
-    instead of after its first, possibly long, fitting steps.
-    """
-    present = {e.name for e in model.effects}
+def _check_add_list(model: AxisModel, names: Sequence[str], rotary: bool) -> None:
+    """Check a whole ``add`` list before any fitting, effect by effect in order."""
+    present = set(model.names)
     for name in names:
         if name == MASS:
             continue
+        if name not in idm.ORDER:
+            raise ParameterError(f'unknown effect {name!r} (known: {", ".join(idm.ORDER)})')
         if name in present:
             raise ParameterError(f'the model already has {name!r}; it is refit anyway'
                                  if model.has(name) else f'{name!r} is added twice')
         if name in ('stribeck', 'presliding') and 'coulomb' not in present:
             raise ParameterError(f'cannot add {name!r} to this model (add coulomb first)')
-        if name in ('coulomb', 'stribeck') and 'presliding' in present:
-            raise ParameterError(f'cannot add {name!r} to this model')
         present.add(name)
 
 
-def fit(kin: Kinematics, model: AxisModel, *, add: Sequence[str] = (), auto: bool = False,
-        folds: int = 5, min_gain: float = 0.1, max_steps: int = 6,
-        progress: Callable[[str], None] | None = None, rotary: bool = False) -> FitResult:
-    """Add ``add`` (one step each) and, with ``auto``, repeat diagnose→add until none pays.
+def _params_text(est: idm.Estimate, name: str, units: Any) -> str:
+    vals = est.scalars.get(name, {})
+    se = est.se.get(name, {})
+    return ', '.join(fmt_param(name, k, v, se.get(k), units) for k, v in vals.items())
 
-    Returns every step with its held-out force NRMSE; the first step is the starting
-    model (``effect=None``, its NRMSE over all sliding samples since nothing is fitted).
+
+def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
+        add: Sequence[str] = (), auto: bool = False, folds: int = 5,
+        min_gain: float = 0.1, min_drop: float = 0.01, max_steps: int = 10,
+        progress: Callable[[str], None] | None = None, rotary: bool = False) -> FitResult:
+    """Refit ``model``; add ``add`` (a step each); with ``auto``, stepwise selection.
+
+    Parameters
+    ----------
+    kin : Kinematics or sequence of Kinematics
+        One run or several (one experiment, one model).
+    model : AxisModel
+        The starting model (``effects: {}`` and a rough mass are fine with ``auto``).
+    add : sequence of str
+        Effects to add, in order (``mass`` is always refit and accepted as a no-op).
+    auto : bool
+        Forward selection with backward elimination until nothing pays.
+    folds, min_gain, min_drop : int, float, float
+        Validation folds and the "pays for its parameters" thresholds (see diagnose).
+    max_steps : int
+        Most selection changes with ``auto``.
+    progress : callable, optional
+        Called with one line per step.
+    rotary : bool
+        Treat the position as an angle even if the model file says linear.
+
+    Returns
+    -------
+    FitResult
+        Steps (the first is the starting model, ``effect=None``, its NRMSE without any
+        fitting); every later NRMSE is held-out.
     """
     say = progress or (lambda s: None)
-    _check_add_list(model, add)
-    mask = residual(kin, model).mask
-    steps = [FitStep(None, residual(kin, model, mask=mask).nrmse(), model, 'starting model')]
-    say(f'start: force NRMSE {100 * steps[0].force_nrmse:.1f} %')
-    for name in add:
-        model = _step(kin, model, name, mask, folds, steps, say)
+    kins = as_list(kin)
+    _check_add_list(model, add, rotary)
+    eng = Engine(kins, model, folds=folds, min_gain=min_gain, min_drop=min_drop,
+                 rotary=rotary)
+    model = eng.model
+    u = eng.units
+    steps = [FitStep(None, eng.nrmse(eng.sse_given), model, 'starting model', 'start')]
+    say(f'start: force NRMSE {100 * steps[0].force_nrmse:.1f} % (as given)')
+    est = eng.h0(model)
+    refit = eng.refit_result(est)
     if not add and not auto:
-        # a plain refit of the existing parameters
-        start = model
-        nrmse = heldout_nrmse(kin, lambda tr: refit_linear(kin, start, tr), mask=mask,
-                              folds=folds)
-        model = refit_linear(kin, model)
-        steps.append(FitStep('refit', nrmse, model, 'refit of all linear parameters'))
-        say(f'refit: force NRMSE {100 * nrmse:.1f} %')
+        steps.append(FitStep(REFIT, est.nrmse_cv, est.model,
+                             'refit of all parameters: ' + _changes_text(refit, u), REFIT))
+        say(f'refit: force NRMSE {100 * est.nrmse_cv:.1f} % ({_changes_text(refit, u)})')
+    elif auto and refit.supported:
+        steps.append(FitStep(REFIT, est.nrmse_cv, est.model,
+                             'own parameters refitted: ' + _changes_text(refit, u), REFIT))
+        say(f'refit pays: {_changes_text(refit, u)}; force NRMSE '
+            f'{100 * est.nrmse_cv:.1f} %')
+    for name in add:
+        if name == MASS:
+            continue
+        eta = None if name in idm.LINEAR else idm.best_eta(
+            eng.D, est.spec.with_(name, _seed_eta(eng, est, name)), name, est.model)
+        est = idm.estimate(eng.D, est.spec.with_(name, eta), est.model)
+        text = f'added {name}: {_params_text(est, name, u)}'
+        steps.append(FitStep(name, est.nrmse_cv, est.model, text, 'add'))
+        say(f'{text}; force NRMSE {100 * est.nrmse_cv:.1f} %')
     if auto:
-        for _ in range(max_steps):
-            d = diagnose(kin, model, folds=folds, min_gain=min_gain, rotary=rotary)
-            best = d.best
-            if best is None:
-                say('nothing else pays for its parameters: done')
-                break
-            if best.effect == steps[-1].effect:
-                say(f'{best.effect} again: the refit did not settle it; stopping')
-                break
-            say(f'diagnose: {best.sentence(rotary=rotary)}')
-            model = _step(kin, model, best.effect, mask, folds, steps, say)
-            if steps[-1].force_nrmse >= steps[-2].force_nrmse:
-                say('the held-out error did not fall: keeping the previous model')
-                steps.pop()
-                model = steps[-1].model
-                break
-    return FitResult(steps=tuple(steps), model=model)
+        est = _select(eng, est, steps, say, max_steps)
+    exp = experiment_notes(eng.D, model)
+    unc = {g: {k: float(v) for k, v in d.items()} for g, d in est.se.items()}
+    final = est.model
+    s = common_scale(model, est)
+    if s is not None and set(final.names) >= set(model.names):
+        # every force parameter of the given model moved by one factor: the simpler
+        # explanation is one wrong number, the input gain (see diagnose.common_scale)
+        final = scale_forces(final, s)
+        unc = {g: {k: v / s for k, v in d.items()} for g, d in unc.items()}
+        exp.insert(0, f'every force parameter moved by ×{s:.3f}: input_gain corrected '
+                      f'from {model.input_gain:.4g} to {final.input_gain:.4g}')
+        steps.append(FitStep('input_gain', est.nrmse_cv, final,
+                             f'input_gain is {final.input_gain:.4g}, not '
+                             f'{model.input_gain:.4g}', REFIT))
+        say(steps[-1].summary)
+    return FitResult(steps=tuple(steps), model=final, uncertainty=unc,
+                     identifiability=tuple(identifiability_notes(est.correlations)),
+                     experiment=tuple(exp), at_bound=dict(est.at_bound))
 
 
-def _step(kin: Kinematics, model: AxisModel, name: str, mask: np.ndarray, folds: int,
-          steps: list, say: Callable[[str], None]) -> AxisModel:
-    start = model
-    nrmse = heldout_nrmse(kin, lambda tr: add_effects(kin, start, [name], tr), mask=mask,
-                          folds=folds)
-    model = add_effects(kin, start, [name])
-    params = model.get(name).params() if name != MASS else {'mass': model.mass}
-    text = f'added {name} {_fmt(params)}'
-    steps.append(FitStep(name, nrmse, model, text))
-    say(f'{text}: force NRMSE {100 * nrmse:.1f} %')
-    return model
+def _seed_eta(eng: Engine, est: idm.Estimate, name: str) -> Any:
+    """Return placeholder nonlinear parameters (best_eta searches from scratch)."""
+    return {'ripple': (1.0, 1), 'stribeck': (1e-3, 1.0), 'delay': 0.0,
+            'backlash': 1e-6, 'presliding': idm.gms_eta(1e-6, 1e3, 0.0)}[name]
 
 
-def _fmt(params: dict) -> str:
-    def one(v: Any) -> str:
-        if isinstance(v, list):
-            return '[' + ', '.join(one(e) for e in v) + ']'
-        return f'{v:.4g}'
-    return ', '.join(f'{k}={one(v)}' for k, v in params.items())
+def _changes_text(refit: Any, u: Any) -> str:
+    return '; '.join(c.sentence(u) for c in refit.changes) or 'no parameter moved'
+
+
+def _select(eng: Engine, est: idm.Estimate, steps: list, say: Callable[[str], None],
+            max_steps: int) -> idm.Estimate:
+    """Forward selection by held-out gain + BIC, backward elimination after each add."""
+    removed_once: set[str] = set()
+    for _ in range(max_steps):
+        names = [n for n in available(est.spec, est.model, eng.units,
+                                      reversals=eng.reversals, both_ways=eng.both_ways)
+                 if n not in removed_once]
+        scored = [eng.score(est, n) for n in names]
+        ok = [c for c in scored if c.supported]
+        if not ok:
+            say('nothing else pays for its parameters: done')
+            break
+        # the held-out BIC ranks: between two that explain the same, the one with fewer
+        # parameters (viscous before a Stribeck curve stretched over every speed)
+        best = min(ok, key=lambda c: c.bic_delta)
+        new = idm.estimate(eng.D, best.spec, best.model)
+        if not new.sse_cv < est.sse_cv:
+            say(f'{best.effect}: the held-out error did not fall: stopping')
+            break
+        est = _research(eng, new, best.effect)
+        steps.append(FitStep(best.effect, est.nrmse_cv, est.model,
+                             f'added {best.effect}: {_params_text(est, best.effect, eng.units)}',
+                             'add'))
+        say(f'added {best.effect}: {_params_text(est, best.effect, eng.units)}; force NRMSE '
+            f'{100 * est.nrmse_cv:.1f} %')
+        est = _backward(eng, est, best.effect, steps, say, removed_once)
+    return est
+
+
+def _research(eng: Engine, est: idm.Estimate, just: str) -> idm.Estimate:
+    """Re-search the nonlinear parameters of the effects already in, as H0 does.
+
+    They were chosen against the residual of a smaller model (a ripple harmonic count
+    picked before the friction was modelled is picked against the friction's residual);
+    with ``just`` added they are chosen again by variable projection, and the new
+    choice is kept when the held-out error does not rise.
+    """
+    for n in est.spec.names:
+        if n == just or n not in idm.NONLINEAR or n == 'presliding':
+            continue
+        eta = idm.best_eta(eng.D, est.spec, n, est.model)
+        if eta == est.spec.eta.get(n):
+            continue
+        new = idm.estimate(eng.D, est.spec.with_(n, eta), est.model)
+        if new.sse_cv <= est.sse_cv:
+            est = new
+    idm.sync(eng.D, est.spec, est.model)
+    return est
+
+
+def _backward(eng: Engine, est: idm.Estimate, just: str, steps: list,
+              say: Callable[[str], None], removed_once: set) -> idm.Estimate:
+    """Drop effects whose removal no longer hurts (once each), worst first."""
+    while True:
+        worst = None
+        for n in est.spec.names:
+            if n == just:
+                continue
+            if n == 'coulomb' and ({'stribeck', 'presliding'} & set(est.spec.names)):
+                continue
+            spec = est.spec.without(n)
+            idm.sync(eng.D, spec, est.model)
+            X, _ = idm.columns(eng.D, spec)
+            sc = idm.cv_design(eng.D, X, idm.target(eng.D, spec))
+            dp = idm.n_params(est.spec) - idm.n_params(spec)
+            ok, explained, bic = eng.pays(sc.sse_cv, est.sse_cv, dp)
+            if not ok and (worst is None or explained < worst[1]):
+                worst = (n, explained)
+        idm.sync(eng.D, est.spec, est.model)
+        if worst is None:
+            return est
+        n = worst[0]
+        new = idm.estimate(eng.D, est.spec.without(n), est.model)
+        est = new
+        removed_once.add(n)
+        steps.append(FitStep(n, est.nrmse_cv, est.model,
+                             f'removed {n}: no longer pays once the others are in', 'remove'))
+        say(f'removed {n}: no longer pays once the others are in; force NRMSE '
+            f'{100 * est.nrmse_cv:.1f} %')
+
+
+def refit_linear(kin: Kinematics | Sequence[Kinematics], model: AxisModel) -> AxisModel:
+    """Return the model with every parameter jointly refit (no effect added/removed)."""
+    eng = Engine(as_list(kin), model, folds=5, min_gain=0.1, min_drop=0.01)
+    return eng.h0(model).model
+
+
+def add_effects(kin: Kinematics | Sequence[Kinematics], model: AxisModel,
+                names: Sequence[str]) -> AxisModel:
+    """``model`` with the named effects added (nonlinear parameters searched), all refit."""
+    return fit(kin, model, add=names).model
+
+
+__all__ = ['FitResult', 'FitStep', 'add_effects', 'fit', 'refit_linear',
+           'significant_changes', 'model_scalars']

@@ -32,18 +32,26 @@ Z99 = 2.576
 
 @dataclasses.dataclass(frozen=True)
 class Whiteness:
-    """Residual correlation test (MATLAB ``resid`` style).
+    """Residual correlation test (MATLAB ``resid`` style), per contiguous segment.
 
     Parameters
     ----------
     lags : ndarray
         Lags [s].
     autocorr, crosscorr : ndarray
-        Normalised autocorrelation of ``r`` and cross-correlation of ``r`` with the input.
+        Normalised autocorrelation of ``r`` and cross-correlation ``r(t + lag)·u(t)``.
     band : float
         99 % confidence half-width for a white residual.
     auto_outside, cross_outside : float
-        Fraction of non-zero lags outside the band.
+        Fraction of non-zero lags outside the band (cross: of the lags it is judged
+        on — only ``lag >= 0`` on closed-loop data).
+    segments : int
+        Contiguous sliding segments the correlations were summed over (the gaps of
+        removed rest samples are never bridged).
+    closed_loop : bool
+        The input was computed from the measured output (feedback): the residual
+        feeds back into later inputs, so negative lags of the cross-correlation are
+        correlated by construction and are not judged.
     """
 
     lags: np.ndarray
@@ -52,47 +60,88 @@ class Whiteness:
     band: float
     auto_outside: float
     cross_outside: float
+    segments: int = 1
+    closed_loop: bool = False
 
     def as_dict(self) -> dict[str, Any]:
         """JSON form."""
         return {'band': self.band, 'autocorr_outside': self.auto_outside,
                 'crosscorr_outside': self.cross_outside,
                 'white': bool(self.auto_outside <= 0.05),
-                'independent_of_input': bool(self.cross_outside <= 0.05)}
+                'independent_of_input': bool(self.cross_outside <= 0.05),
+                'segments': int(self.segments), 'closed_loop': bool(self.closed_loop),
+                'crosscorr_lags': 'lag >= 0 only (closed loop)' if self.closed_loop
+                else 'all'}
+
+    def sentence(self) -> str:
+        """One line for the terminal."""
+        cross = (f'{100 * self.cross_outside:.0f} % of input cross-correlation lags '
+                 + ('(closed-loop data: judged on lags where the input precedes the '
+                    'residual only; the feedback correlates the others by construction)'
+                    if self.closed_loop else ''))
+        return (f'whiteness: {100 * self.auto_outside:.0f} % of autocorrelation lags outside '
+                f'the 99 % band (over {self.segments} contiguous segments), {cross}').rstrip()
 
 
-def whiteness(kin: Kinematics, res: Residual, *, max_lag_s: float | None = None) \
-        -> Whiteness:
-    """Auto- and cross-correlation of the (decimated) residual with a 99 % band."""
+def is_closed_loop(run: Any) -> bool:
+    """Whether a run was recorded under feedback (a reference or a controller is logged)."""
+    meta = getattr(run, 'metadata', {}) or {}
+    return bool(getattr(run, 'reference', None) is not None or 'controller' in meta)
+
+
+def _segments(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``[start, stop)`` of the runs of True in ``mask``."""
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
+
+
+def whiteness(kin: Kinematics, res: Residual, *, max_lag_s: float | None = None,
+              closed_loop: bool = False) -> Whiteness:
+    """Auto- and cross-correlation of the (decimated) residual with a 99 % band.
+
+    Correlations are summed inside each contiguous sliding segment and normalised
+    once: lags never reach across the gap of removed rest samples (a product of two
+    samples on either side of a stop would test nothing).
+    """
     step = max(1, kin.window // 2)
     m = res.mask[::step]
-    r = res.r[::step][m]
-    u = kin.u[::step][m]
-    r = r - r.mean()
-    u = u - u.mean()
-    n = len(r)
+    r_all = res.r[::step]
+    u_all = kin.u[::step]
+    segs = [(a, b) for a, b in _segments(m) if b - a >= 3]
+    n = sum(b - a for a, b in segs)
     if n < 20:
         raise MotorCompError(f'{kin.name}: too few sliding samples for a whiteness test')
-    # 25 lags as MATLAB resid's default, unless a span [s] is asked for
+    mu_r = float(np.mean(r_all[m]))
+    mu_u = float(np.mean(u_all[m]))
     max_lag = 25 if max_lag_s is None else int(max_lag_s / (step * kin.dt))
-    max_lag = int(np.clip(max_lag, 5, n // 4))
-    # one zero-padded FFT gives both correlations with the same normalisation, in
-    # O(n log n); np.correlate would be O(n·lags) per signal
-    nfft = 1 << int(np.ceil(np.log2(2 * n)))
-    fr = np.fft.rfft(r, nfft)
-    fu = np.fft.rfft(u, nfft)
-    acf = np.fft.irfft(fr * np.conj(fr), nfft)
-    ccf = np.fft.irfft(fr * np.conj(fu), nfft)
-    norm_a = acf[0] if acf[0] > 0 else 1.0
-    norm_c = np.sqrt(acf[0] * np.sum(u * u)) or 1.0
+    max_lag = int(np.clip(max_lag, 5, max(5, n // 4)))
     lags = np.arange(-max_lag, max_lag + 1)
-    ac = acf[np.abs(lags)] / norm_a
-    cc = ccf[lags % nfft] / norm_c
+    acf = np.zeros(len(lags))
+    ccf = np.zeros(len(lags))
+    srr = suu = 0.0
+    for a, b in segs:
+        r = r_all[a:b] - mu_r
+        u = u_all[a:b] - mu_u
+        srr += float(r @ r)
+        suu += float(u @ u)
+        L = b - a
+        nfft = 1 << int(np.ceil(np.log2(2 * L)))
+        fr = np.fft.rfft(r, nfft)
+        fu = np.fft.rfft(u, nfft)
+        ac = np.fft.irfft(fr * np.conj(fr), nfft)
+        cc = np.fft.irfft(fr * np.conj(fu), nfft)
+        ok = np.abs(lags) < L
+        acf[ok] += ac[np.abs(lags[ok])]
+        ccf[ok] += cc[lags[ok] % nfft]
+    ac = acf / (srr if srr > 0 else 1.0)
+    cc = ccf / (np.sqrt(srr * suu) or 1.0)
     band = Z99 / np.sqrt(n)
     nz = lags != 0
+    judged = lags >= 0 if closed_loop else np.ones(len(lags), dtype=bool)
     return Whiteness(lags=lags * step * kin.dt, autocorr=ac, crosscorr=cc, band=band,
                      auto_outside=float(np.mean(np.abs(ac[nz]) > band)),
-                     cross_outside=float(np.mean(np.abs(cc) > band)))
+                     cross_outside=float(np.mean(np.abs(cc[judged]) > band)),
+                     segments=len(segs), closed_loop=closed_loop)
 
 
 def binned(xv: np.ndarray, yv: np.ndarray, bins: int = 40) \
@@ -133,7 +182,8 @@ def _plt():
 
 
 def residual_figures(out: Path, kin: Kinematics, res: Residual, *, label: str = '',
-                     rotary: bool = False) -> list[tuple[str, str]]:
+                     rotary: bool = False, closed_loop: bool = False) \
+        -> list[tuple[str, str]]:
     """Write the residual views as PNGs in ``out``; return ``(file, caption)`` pairs.
 
     With ``rotary`` the position is an angle [rad] and the spectrum is drawn against
@@ -143,13 +193,15 @@ def residual_figures(out: Path, kin: Kinematics, res: Residual, *, label: str = 
     m = res.mask
     figs: list[tuple[str, str]] = []
     t = kin.t - kin.t[0]
+    fu, vu = ('N·m', 'rad/s') if rotary else ('N', 'mm/s')
+    vk = 1.0 if rotary else 1e3
 
     fig, ax = plt.subplots(figsize=(8, 3.2), dpi=90)
     ax.plot(t, res.f_in, color='0.75', lw=0.6, label='drive force F_in')
     r_plot = np.where(m, res.r, np.nan)
     ax.plot(t, r_plot, color='C3', lw=0.7, label='residual r')
     ax.set_xlabel('time [s]')
-    ax.set_ylabel('force [N]')
+    ax.set_ylabel('torque [N·m]' if rotary else 'force [N]')
     ax.set_title(f'Force residual over time {label}')
     ax.legend(loc='upper right', fontsize=8)
     fig.tight_layout()
@@ -165,7 +217,7 @@ def residual_figures(out: Path, kin: Kinematics, res: Residual, *, label: str = 
     a1.plot(k * res.x[m][::5], res.r[m][::5], '.', ms=1, color='0.6')
     a1.plot(k * c, mu, color='C3', lw=1.2, label='mean per position bin')
     a1.set_xlabel(xlabel)
-    a1.set_ylabel('residual [N]')
+    a1.set_ylabel(f'residual [{fu}]')
     a1.set_title('Residual vs position')
     a1.legend(fontsize=8)
     f = spec.frequency[1:]
@@ -186,7 +238,7 @@ def residual_figures(out: Path, kin: Kinematics, res: Residual, *, label: str = 
         a2.annotate(f'{per[i]:.3g} mm', (per[i], amp[i]), textcoords='offset points',
                     xytext=(5, -10), fontsize=8, color='C3')
         a2.set_xlabel('spatial period [mm]')
-    a2.set_ylabel('amplitude [N]')
+    a2.set_ylabel(f'amplitude [{fu}]')
     a2.set_title('Spatial spectrum of the residual')
     fig.tight_layout()
     fig.savefig(out / 'residual_position.png')
@@ -198,12 +250,12 @@ def residual_figures(out: Path, kin: Kinematics, res: Residual, *, label: str = 
     vmax = float(np.percentile(np.abs(res.v[m]), 99))
     sel = m & (np.abs(res.v) <= vmax)
     c, mu, sd = binned(res.v[sel], res.r[sel], bins=60)
-    ax.plot(1e3 * res.v[sel][::5], res.r[sel][::5], '.', ms=1, color='0.6')
-    ax.fill_between(1e3 * c, mu - sd, mu + sd, color='C3', alpha=0.2)
-    ax.plot(1e3 * c, mu, color='C3', lw=1.2)
+    ax.plot(vk * res.v[sel][::5], res.r[sel][::5], '.', ms=1, color='0.6')
+    ax.fill_between(vk * c, mu - sd, mu + sd, color='C3', alpha=0.2)
+    ax.plot(vk * c, mu, color='C3', lw=1.2)
     ax.axhline(0, color='k', lw=0.5)
-    ax.set_xlabel('velocity [mm/s]')
-    ax.set_ylabel('residual [N]')
+    ax.set_xlabel(f'velocity [{vu}]')
+    ax.set_ylabel(f'residual [{fu}]')
     ax.set_title('Residual vs velocity (missing friction curve)')
     fig.tight_layout()
     fig.savefig(out / 'residual_velocity.png')
@@ -216,7 +268,7 @@ def residual_figures(out: Path, kin: Kinematics, res: Residual, *, label: str = 
     fig, ax = plt.subplots(figsize=(6, 3.2), dpi=90)
     ax.plot(1e3 * ts, mean, color='C3')
     ax.set_xlabel('time since reversal [ms]')
-    ax.set_ylabel('mean |residual| [N]')
+    ax.set_ylabel(f'mean |residual| [{fu}]')
     ax.set_title(f'Residual after reversals ({nrev} reversals)')
     fig.tight_layout()
     fig.savefig(out / 'residual_reversal.png')
@@ -224,7 +276,7 @@ def residual_figures(out: Path, kin: Kinematics, res: Residual, *, label: str = 
     figs.append(('residual_reversal.png', 'Mean |residual| against time since each '
                  'reversal: a burst right after reversing is pre-sliding or backlash.'))
 
-    w = whiteness(kin, res)
+    w = whiteness(kin, res, closed_loop=closed_loop)
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.2), dpi=90)
     for a, y, title in ((a1, w.autocorr, 'Autocorrelation of r'),
                         (a2, w.crosscorr, 'Cross-correlation r × input')):
@@ -236,10 +288,8 @@ def residual_figures(out: Path, kin: Kinematics, res: Residual, *, label: str = 
     fig.tight_layout()
     fig.savefig(out / 'residual_whiteness.png')
     plt.close(fig)
-    figs.append(('residual_whiteness.png', f'Whiteness test: {100 * w.auto_outside:.0f} % '
-                 f'of autocorrelation lags and {100 * w.cross_outside:.0f} % of '
-                 'cross-correlation lags fall outside the 99 % band (a good model leaves '
-                 'at most a few %).'))
+    figs.append(('residual_whiteness.png', w.sentence() + ' (a good model leaves at most '
+                 'a few % outside).'))
     return figs
 
 

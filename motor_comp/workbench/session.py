@@ -8,20 +8,27 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Sequence
 
 from motor_comp.errors import InputFileError
 from motor_comp.logs.run import Run
-from motor_comp.physics.axis import AxisModel, InputKind
+from motor_comp.physics.axis import AxisKind, AxisModel, InputKind
 from motor_comp.workbench.derivatives import InputHold, Kinematics, kinematics
 
 
 @dataclasses.dataclass(frozen=True)
 class Session:
-    """A run, its kinematics and a model."""
+    """One or several runs (one experiment), their kinematics and a model.
+
+    ``run``/``kin`` are the first run's (figures, position views); ``runs``/``kins``
+    all of them (the identification uses every run).
+    """
 
     run: Run
     kin: Kinematics
     model: AxisModel
+    runs: tuple = ()
+    kins: tuple = ()
 
 
 #: why the workbench cannot work without the logged drive input
@@ -44,14 +51,27 @@ def load_run(path: str | Path) -> Run:
     return read_run(path, require={'voltage': _NEEDS_INPUT})
 
 
-def open_session(run_path: str | Path, model_path: str | Path, *,
-                 window_s: float = 0.02, hold: str | None = None) -> Session:
-    """Load model and run, check the run has the drive input, compute kinematics."""
+def open_session(run_path: str | Path | Sequence[str | Path], model_path: str | Path, *,
+                 window_s: float = 0.02, hold: str | None = None,
+                 rotary: bool = False) -> Session:
+    """Load model and run(s), check each run has the drive input, compute kinematics.
+
+    Several run paths are one experiment (DESIGN.md §6): every run is loaded and
+    differentiated on its own grid; the workbench fits one model on all of them.
+    ``rotary`` turns a model file without ``axis: rotary`` into a rotary one.
+    """
     model = AxisModel.load(model_path)
-    run = load_run(run_path)
-    if run.voltage is None:    # a Run that did not come from read_run(require=...)
-        raise InputFileError(f'{run_path}: no drive input (/axis/voltage) in this run; '
-                             f'{_NEEDS_INPUT}')
-    kin = kinematics(run, window_s=window_s,
-                     hold=InputHold(hold) if hold else default_hold(model))
-    return Session(run=run, kin=kin, model=model)
+    if rotary and model.axis is not AxisKind.ROTARY:
+        model = model.replace(axis=AxisKind.ROTARY)
+    paths = [run_path] if isinstance(run_path, (str, Path)) else list(run_path)
+    runs, kins = [], []
+    for path in paths:
+        run = load_run(path)
+        if run.voltage is None:    # a Run that did not come from read_run(require=...)
+            raise InputFileError(f'{path}: no drive input (/axis/voltage) in this run; '
+                                 f'{_NEEDS_INPUT}')
+        runs.append(run)
+        kins.append(kinematics(run, window_s=window_s,
+                               hold=InputHold(hold) if hold else default_hold(model)))
+    return Session(run=runs[0], kin=kins[0], model=model, runs=tuple(runs),
+                   kins=tuple(kins))

@@ -88,7 +88,8 @@ def hidden_effect(name: str, rng: np.random.Generator) -> tuple[Any, dict]:
              'delta': _u(rng, r['delta'])}
     elif name == 'presliding':
         k = _u(rng, r['stiffness'])
-        p = {'alpha': list(GMS_ALPHA), 'k': [s * k for s in GMS_K_SHAPE], 'c': 1000.0}
+        p = {'alpha': list(GMS_ALPHA), 'k': [s * k for s in GMS_K_SHAPE],
+             'C': 1000.0 * BASE_FC}
         return make_effect(name, p), {'stiffness': k}
     elif name == 'ripple':
         amp, ph = _u(rng, r['amplitude']), float(rng.uniform(0, 2 * np.pi))

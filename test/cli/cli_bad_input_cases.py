@@ -419,6 +419,11 @@ CASES: list[Case] = _run_file_cases() + [
     _c('demo-out-file', 'demo', '--out is a file', 'demo --out {d}/afile', ['{d}/afile']),
     _c('demo-only-unknown', 'demo', '--only unknown run', 'demo --out {d}/demo --only nope',
        ['--only', 'nope']),
+    # --- export-table, study (issue 12; their full bad-input tests: test_cli_compensation.py)
+    _c('export-table-points', 'export_table', '--points 1',
+       'export-table {d}/model.yaml --points 1 -o {d}/t.csv', ['--points'], subprocess=True),
+    _c('study-duration-neg', 'study', '--duration -1', 'study compensate --duration -1',
+       ['--duration', '-1'], subprocess=True),
     # --- the dispatcher
     _c('main-unknown-command', 'main', 'unknown command', 'frobnicate',
        ['frobnicate'], subprocess=True),

@@ -17,6 +17,7 @@ from motor_comp.control import AdaptiveParams, default_trajectory, make_controll
 from motor_comp.control.adaptive_sliding import ESTIMATES, estimates_in_units, \
     nominal_theta, noise_levels, projection_box
 from motor_comp.control.controller import C_S, C_TH
+from motor_comp.control.nominal import derive_nominal
 from motor_comp.control.trajectories import PointToPoint
 from motor_comp.physics import StepLoad, make_effect
 
@@ -58,22 +59,24 @@ def _late(plant, res, *, window=30.0) -> LateBehaviour:
 def long_runs(pmlm):
     """120 s of the default p2p run: PID, adaptive (robust laws), adaptive (Tan's laws)."""
     traj = default_trajectory('pmlm')
+    nominal = derive_nominal(pmlm)
     out = {}
     for label, mode, kw in (('pid', 'pid', {}), ('robust', 'adaptive_sliding', {}),
                             ('legacy', 'adaptive_sliding', LEGACY)):
-        ctrl = make_controller(mode, plant=pmlm, **kw)
+        # the controller knows the nominal model (mass +20 %, friction/ripple at 50 %)
+        ctrl = make_controller(mode, plant=nominal, **kw)
         res = simulate(pmlm, ctrl, traj, duration=LONG)
-        out[label] = (res, ctrl, _late(pmlm, res))
+        out[label] = (res, ctrl, _late(nominal, res))
     return out
 
 
 def test_long_run_estimates_stay_inside_their_box(long_runs):
     late = long_runs['robust'][2]
-    # measured ≥ 4.8 % (k̂ ≈ 1.4 N of its 30 N box; the others ≥ 25 %)
+    # boxes around the nominal (mass +20 %, friction/ripple 50 %)
     assert min(late.box_margin.values()) >= 0.02, late.box_margin
-    # Tan's laws: θ̂1 (16.2 kg), fv (45 N·s/m) and k̂ (30 N) end on their box edges
+    # Tan's laws: θ̂1 and k̂ end on their box edges (fv drifts too, 71 % up its box)
     legacy = long_runs['legacy'][2].box_margin
-    assert max(legacy['mass'], legacy['fv'], legacy['robust_gain']) <= 0.005
+    assert max(legacy['mass'], legacy['robust_gain']) <= 0.005
 
 
 def test_long_run_does_not_hunt_at_the_dwells(long_runs):

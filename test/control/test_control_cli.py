@@ -12,6 +12,7 @@ import pytest
 
 import motor_comp.cli.main as cli
 from motor_comp.control import default_trajectory, make_controller, simulate
+from motor_comp.control.nominal import derive_nominal
 from motor_comp.control.sweep import expand_grid, run_point, run_sweep
 
 
@@ -38,7 +39,8 @@ def test_simulate_json_matches_library(capsys, ballscrew):
     assert {'t', 'magnitude'} <= set(entry['glitches'][0])
     assert len(entry['glitches']) == 2          # reversals at 1 s and 2 s (sine, P = 2 s)
     from motor_comp.analysis.metrics import compute_metrics
-    ctrl = make_controller('npid', plant=ballscrew, feedforward='static+gms')
+    # the CLI's controller knows the nominal model derived from the plant file
+    ctrl = make_controller('npid', plant=derive_nominal(ballscrew), feedforward='static+gms')
     res = simulate(ballscrew, ctrl, default_trajectory('ballscrew'), duration=3.0)
     m = compute_metrics(res.to_run())
     assert entry['rms_error'] == m.rms_error and entry['max_glitch'] == m.max_glitch
@@ -57,7 +59,7 @@ def test_simulate_records_mcap_with_parameters(capsys, tmp_path, pmlm):
     assert meta['seed'] == '3' and meta['feedforward'] == 'none'
     assert json.loads(meta['gains'])['phi'] == 3e-4
     assert json.loads(meta['settings']) == {'phi': 3e-4}
-    ctrl = make_controller('adaptive_sliding', plant=pmlm, phi=3e-4)
+    ctrl = make_controller('adaptive_sliding', plant=derive_nominal(pmlm), phi=3e-4)
     res = simulate(pmlm, ctrl, default_trajectory('pmlm'), duration=1.0, seed=3)
     np.testing.assert_allclose(run.position, res.position, atol=1e-12)
     np.testing.assert_allclose(run.voltage, res.voltage, rtol=1e-12)

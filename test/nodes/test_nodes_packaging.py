@@ -11,11 +11,13 @@ import pytest
 import yaml
 
 from motor_comp.nodes import controller_node, plant_node, recorder_node, trajectory_node
+from motor_comp.nodes.common import AUTOSTART
 
 ROOT = Path(__file__).resolve().parents[2]
-NODES = {'plant_node': plant_node.PARAMS, 'trajectory_node': trajectory_node.PARAMS,
-         'controller_node': controller_node.BASE_PARAMS,
-         'recorder_node': recorder_node.PARAMS}
+NODES = {'plant_node': plant_node.PARAMS + (AUTOSTART,),
+         'trajectory_node': trajectory_node.PARAMS,
+         'controller_node': controller_node.BASE_PARAMS + (AUTOSTART,),
+         'recorder_node': recorder_node.PARAMS + (AUTOSTART,)}
 
 
 @pytest.mark.timeout(120)

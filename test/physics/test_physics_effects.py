@@ -24,7 +24,7 @@ speeds = st.floats(min_value=1e-6, max_value=10.0)
 
 def test_vocabulary_is_design_section_6():
     assert VOCABULARY == ('coulomb', 'viscous', 'stribeck', 'presliding', 'ripple',
-                          'offset', 'spring', 'asymmetry', 'delay', 'backlash')
+                          'offset', 'spring', 'asymmetry', 'delay', 'backlash', 'gravity')
     assert all(EFFECTS[name].name == name for name in VOCABULARY)
 
 
@@ -43,7 +43,11 @@ BAD = [
     ('presliding', {'alpha': [1.5, -0.5], 'k': [1e6, 1e5]}, 'presliding.alpha[1]'),
     ('presliding', {'alpha': [0.5, 0.5], 'k': [1e6]}, 'presliding.k'),
     ('presliding', {'alpha': [0.5, 0.5], 'k': [1e6, 0.0]}, 'presliding.k[1]'),
-    ('presliding', {'alpha': [0.5, 0.5], 'k': [1e6, 1e5], 'c': 0.0}, 'presliding.c'),
+    ('presliding', {'alpha': [0.5, 0.5], 'k': [1e6, 1e5], 'C': 0.0}, 'presliding.C'),
+    ('presliding', {'alpha': [0.5, 0.5], 'k': [1e6, 1e5], 'sigma': [1.0]}, 'presliding.sigma'),
+    ('presliding', {'alpha': [0.5, 0.5], 'k': [1e6, 1e5], 'sigma': [1.0, -1.0]},
+     'presliding.sigma[1]'),
+    ('presliding', {'alpha': [0.5, 0.5], 'k': [1e6, 1e5], 'c': 100.0}, "'c' [1/s]"),
     ('presliding', {'alpha': [1 / 9] * 9, 'k': [1e6] * 9}, 'presliding.alpha'),
     ('presliding', {'alpha': 'abc', 'k': [1e6]}, 'presliding.alpha'),
     ('ripple', {'period': 0.0}, 'ripple.period'),
@@ -83,11 +87,12 @@ def test_params_round_trip_through_the_model_file_form(name):
     examples = {
         'coulomb': {'fc': 3.5}, 'viscous': {'fv': 12.0},
         'stribeck': {'fs': 7.0, 'vs': 0.002, 'delta': 1.5},
-        'presliding': {'alpha': [0.6, 0.4], 'k': [2e6, 5e5], 'c': 500.0},
+        'presliding': {'alpha': [0.6, 0.4], 'k': [2e6, 5e5], 'C': 5000.0,
+                       'sigma': [200.0, 50.0]},
         'ripple': {'period': 0.016, 'harmonics': [[1.0, -2.0], [0.5, 0.25]]},
         'offset': {'f0': -4.0}, 'spring': {'k': 250.0, 'x0': 0.01},
         'asymmetry': {'dfc': 1.5, 'dfv': -3.0}, 'delay': {'tau': 0.002},
-        'backlash': {'width': 5e-6},
+        'backlash': {'width': 5e-6}, 'gravity': {'mgl': 3.0, 'q0': -0.5},
     }
     e = make_effect(name, examples[name])
     assert e.params() == examples[name]
@@ -181,12 +186,18 @@ def test_stribeck_regressor_coefficient_is_fs_minus_fc():
 
 
 # ---- input and output effects ------------------------------------------------------
-def test_delay_apply_shifts_a_sampled_signal():
+def test_delay_apply_shifts_a_sampled_signal_with_zero_before_the_start():
     t = np.arange(0.0, 0.1, 1e-4)
-    u = np.sin(2 * math.pi * 20 * t)
+    u = 1.0 + np.cos(2 * math.pi * 20 * t)           # u[0] = 2: the start is visible
     out = Delay(tau=0.003).apply(t, u)
     np.testing.assert_allclose(out[30:], u[:-30], atol=1e-12)
-    assert np.all(out[:30] == u[0])
+    # a drive at power-on: nothing before the start (to the rounding of t − τ)
+    np.testing.assert_allclose(out[:30], 0.0, atol=1e-12)
+    # a fractional delay ramps in from that zero, one sample before t[0], like the kernel
+    half = Delay(tau=0.00005).apply(t, u)
+    assert half[0] == pytest.approx(0.5 * u[0])
+    np.testing.assert_allclose(half[1:], 0.5 * (u[1:] + u[:-1]), atol=1e-12)
+    assert np.array_equal(Delay(tau=0.0).apply(t, u), u)
 
 
 @FAST

@@ -143,7 +143,8 @@ _ALL_EFFECTS = {
     'offset': {'f0': 0.7}, 'spring': {'k': 400.0, 'x0': 0.001},
     'asymmetry': {'dfc': 0.6, 'dfv': 4.0}, 'delay': {'tau': 0.00033},
     'backlash': {'width': 2e-5}}
-_GMS = {'alpha': [0.6, 0.3, 0.1], 'k': [2e6, 5e5, 1e5], 'c': 800.0}
+_GMS = {'alpha': [0.6, 0.3, 0.1], 'k': [2e6, 5e5, 1e5], 'C': 2400.0,
+        'sigma': [400.0, 100.0, 20.0]}
 
 #: runs in the test process (compiled) and in a child with NUMBA_DISABLE_JIT=1 (pure
 #: Python): the same source, so any difference is the compilation

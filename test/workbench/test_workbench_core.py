@@ -11,7 +11,7 @@ from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import make_effect
 from motor_comp.workbench import kinematics, refit_linear, residual
 from motor_comp.workbench.candidates import spatial_spectrum
-from motor_comp.workbench.diagnose import fold_masks
+from motor_comp.workbench.ident import Data
 from motor_comp.workbench.report import whiteness
 from motor_comp.workbench.residual import force_nrmse, motor_position, reversals
 
@@ -139,15 +139,23 @@ def test_reversals_of_a_sine():
     assert [d for _, d in rev] == [-1, 1, -1, 1]
 
 
-def test_fold_masks_partition_in_contiguous_blocks():
-    mask = np.ones(103, dtype=bool)
-    mask[::7] = False
-    folds = fold_masks(mask, 5)
-    total = np.sum(folds, axis=0)
-    assert np.array_equal(total.astype(bool), mask) and total.max() == 1
-    for f in folds:
-        idx = np.flatnonzero(f)
-        assert np.all(np.flatnonzero(mask[idx[0]:idx[-1] + 1]) + idx[0] == idx)
+def test_folds_are_short_interleaved_blocks_with_an_hv_gap():
+    """Every fold covers the whole record; training never touches a held-out block."""
+    kin = kinematics(analytic_run(BASE, duration=20.0), hold='sample')
+    D = Data([kin], BASE, folds=5)
+    t = kin.t[D.parts[0].rows]
+    assert D.n_blocks >= 25
+    half = 0.5 * D.window * kin.dt
+    for f in range(5):
+        held = D.fold == f
+        assert t[held].min() < 0.15 * t.max() and t[held].max() > 0.85 * t.max()
+        train = D.train_rows(f)
+        assert not np.any(train & held)
+        # the hv gap: no training sample within (about) half a smoother of a held-out one
+        gap = np.min(np.abs(t[train][:, None] - t[held][None, :]), axis=1)
+        assert gap.min() >= 0.8 * half
+        # and nothing else is lost: every other row trains
+        assert np.count_nonzero(~held & ~train) < 0.2 * np.count_nonzero(~held)
 
 
 def test_zero_backlash_is_the_measurement():

@@ -6,9 +6,10 @@ from typing import Any, Mapping
 from motor_comp.errors import ParameterError
 from motor_comp.physics.effects.asymmetry import Asymmetry
 from motor_comp.physics.effects.backlash import Backlash
-from motor_comp.physics.effects.base import Effect, EffectKind
+from motor_comp.physics.effects.base import BOTH_AXES, AxisKind, Effect, EffectKind
 from motor_comp.physics.effects.coulomb import Coulomb
 from motor_comp.physics.effects.delay import Delay
+from motor_comp.physics.effects.gravity import Gravity
 from motor_comp.physics.effects.offset import Offset
 from motor_comp.physics.effects.presliding import Presliding
 from motor_comp.physics.effects.ripple import Ripple
@@ -19,7 +20,7 @@ from motor_comp.physics.effects.viscous import Viscous
 #: the effect vocabulary of DESIGN.md §6, in canonical order
 EFFECTS: dict[str, type[Effect]] = {
     cls.name: cls for cls in (Coulomb, Viscous, Stribeck, Presliding, Ripple, Offset,
-                              Spring, Asymmetry, Delay, Backlash)
+                              Spring, Asymmetry, Delay, Backlash, Gravity)
 }
 
 VOCABULARY: tuple[str, ...] = tuple(EFFECTS)
@@ -35,6 +36,6 @@ def make_effect(name: str, params: Mapping[str, Any] | None = None) -> Effect:
     return cls.from_params(params)
 
 
-__all__ = ['EFFECTS', 'VOCABULARY', 'Effect', 'EffectKind', 'make_effect', 'Asymmetry',
-           'Backlash', 'Coulomb', 'Delay', 'Offset', 'Presliding', 'Ripple', 'Spring',
-           'Stribeck', 'Viscous']
+__all__ = ['EFFECTS', 'VOCABULARY', 'AxisKind', 'BOTH_AXES', 'Effect', 'EffectKind',
+           'make_effect', 'Asymmetry', 'Backlash', 'Coulomb', 'Delay', 'Gravity', 'Offset',
+           'Presliding', 'Ripple', 'Spring', 'Stribeck', 'Viscous']

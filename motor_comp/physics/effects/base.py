@@ -13,6 +13,17 @@ from typing import Any, ClassVar, Mapping
 from motor_comp.errors import ParameterError
 
 
+class AxisKind(enum.Enum):
+    """Linear axis (m, N, kg) or rotary axis (rad, N·m, kg·m²); DESIGN.md §6 ``axis:``."""
+
+    LINEAR = 'linear'
+    ROTARY = 'rotary'
+
+
+#: both axis kinds: what an effect supports unless it says otherwise
+BOTH_AXES = frozenset(AxisKind)
+
+
 class EffectKind(enum.Enum):
     """Where an effect acts on the axis."""
 
@@ -29,6 +40,11 @@ class Effect:
     kind: ClassVar[EffectKind] = EffectKind.FORCE
     #: human wording used in diagnose output, e.g. "Coulomb friction"
     title: ClassVar[str] = ''
+    #: the axis kinds the law is physical on.  Every friction, ripple, spring, offset,
+    #: delay and backlash law reads the same in rad/N·m as in m/N, so all effects take
+    #: both kinds except ``gravity`` (rotary only: on a linear axis gravity is an
+    #: ``offset``).  No effect is linear-only today; the check in ``AxisModel`` is general.
+    axes: ClassVar[frozenset] = BOTH_AXES
 
     def params(self) -> dict[str, Any]:
         """Parameters in model-file form (DESIGN.md §6 table), SI units."""

@@ -34,6 +34,29 @@ class Delay(Effect):
         object.__setattr__(self, 'tau', tau)
 
     def apply(self, t: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """Delayed signal ``u(t − τ)`` by linear interpolation; held at ``u[0]`` before start."""
+        """Delayed signal ``u(t − τ)`` by linear interpolation; zero before the start.
+
+        The one start-up convention of the project (issue 15 item 6), the same as the
+        plant kernel's dead-time buffer: before the first sample the command was 0 (a
+        drive at power-on), and between that zero, taken one sample period before
+        ``t[0]``, and ``u[0]`` the signal is interpolated linearly like everywhere else.
+        For uniform samples at the physics step this is exactly the command the kernel
+        applies (``S_UEFF``).
+
+        Parameters
+        ----------
+        t : ndarray
+            Increasing sample times [s].
+        u : ndarray
+            Samples of the command at ``t``.
+        """
         t = np.asarray(t, dtype=float)
-        return np.interp(t - self.tau, t, np.asarray(u, dtype=float))
+        u = np.asarray(u, dtype=float)
+        if t.size == 0:
+            return u.copy()
+        h = t[1] - t[0] if t.size > 1 else 0.0
+        if h > 0.0:
+            t = np.concatenate(([t[0] - h], t))
+            u = np.concatenate(([0.0], u))
+            return np.interp(np.asarray(t[1:]) - self.tau, t, u, left=0.0)
+        return np.interp(t - self.tau, t, u, left=0.0)

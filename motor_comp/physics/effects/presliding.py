@@ -1,28 +1,47 @@
 """Generalized Maxwell-Slip pre-sliding friction (GMS; Lampaert, Al-Bender, Swevers 2003).
 
-N elementary blocks, each a spring ``k_i`` [N/m] with a slip limit ``α_i·|s(v)|``
-(Chiew et al. eq. 3–5, DESIGN.md §3):
+N elementary blocks, element ``i`` a spring ``k_i`` [N/m] of deflection ``z_i = F_i/k_i``
+with a slip limit ``α_i·|s(v)|`` (Lampaert et al. 2003 eq. 5–7; Chiew et al. eq. 3–5;
+DESIGN.md §3):
 
-* sticking:  ``dF_i/dt = k_i·v``            until ``F_i`` reaches ``α_i·s(v)`` (signed:
-  in the direction of motion; an element loaded against the motion unloads elastically);
-* slipping:  ``dF_i/dt = c·(α_i·s(v) − F_i)`` until the velocity reverses.
+* sticking:  ``dF_i/dt = k_i·v``  until ``F_i`` reaches ``α_i·s(v)`` (signed: in the
+  direction of motion; an element loaded against the motion unloads elastically);
+* slipping:  ``dF_i/dt = sgn(v)·C·(α_i − F_i/s(v))`` until the velocity reverses, with
+  the *constant attraction* ``C`` [N/s].  Since ``sgn(s) = sgn(v)`` this is
+  ``(C/|s(v)|)·(α_i·s(v) − F_i)``: a relaxation towards ``α_i·s(v)`` whose rate
+  ``C/|s(v)|`` [1/s] follows the Stribeck curve (slower near break-away, where |s| is
+  largest).  At constant ``v`` it integrates exactly over a step ``dt`` as
+  ``F_i ← α_i·s − (α_i·s − F_i)·e^{−C·dt/|s(v)|}``.
 
-``s(v)`` is the *signed* Stribeck curve (the unsigned form is unstable for v < 0).
-The slip law is written in rate form with ``c`` [1/s]; it equals Lampaert's
-``sgn(v)·C·(α_i − F_i/s(v))`` with ``C = c·|s(v)|``, and integrates exactly over a
-step as ``F_i ← α_i s − (α_i s − F_i)·e^{−c·dt}``.  Total GMS force
-``F = Σ F_i + σ·v``; ``σ·v`` is the model's ``viscous`` effect, so it is not repeated
-here.  When the model has presliding, the sliding friction (coulomb + stribeck) is
-carried by the elements, never added a second time.
+``s(v) = sgn(v)·[fc + (fs − fc)·e^{−|v/vs|^δ}]`` is the *signed* Stribeck curve (the
+unsigned form is unstable for v < 0).  Total friction (Lampaert eq. 8)
+``F = Σ (F_i + σ_i·ż_i) + σ_2·v``: ``σ_i`` [N·s/m] is the element micro-damping, which
+damps the pre-sliding resonance ``sqrt(Σk_i/M)`` of the axis, and ``ż_i`` the element's
+deflection rate (``v`` while it sticks, ``Ḟ_i/k_i`` while it slips; over a step the laws
+here use ``ΔF_i/(k_i·dt)``).  Near rest every element sticks and the axis is the
+oscillator ``M·ẍ + (Σσ_i + d)·ẋ + Σk_i·x = f`` (``d``: drive damping + ``fv``), so
+``ζ = (Σσ_i + d)/(2·sqrt(Σk_i·M))`` (:meth:`Presliding.damping_ratio`).  The default
+ball-screw (``config/ballscrew.yaml``: M = 25 kg, Σk_i = 1.23e7 N/m, σ_i = k_i·1.4 ms,
+d = 250 N·s/m) rings at 701 rad/s with ζ = 0.50; without σ_i it was ζ = 0.0071.
+``σ_2·v`` is the model's ``viscous`` effect, so it is not repeated here.  When the model
+has presliding, the sliding friction (coulomb + stribeck) is carried by the elements,
+never added a second time.
+
+Units: F_i, s(v) [N]; k_i [N/m]; C [N/s]; σ_i [N·s/m]; on a rotary axis read N·m, rad.
+Model files from before the published law carried a slip *rate* ``c`` [1/s]
+(``dF_i/dt = c·(α_i·s − F_i)``); :func:`upgrade_legacy_params` converts it with
+``C = c·fc``, which keeps the relaxation rate at sliding speeds (|s| = fc) unchanged.
 """
 from __future__ import annotations
 
 import dataclasses
+import math
+from typing import Any, Mapping
 
 import numpy as np
 from numba import njit
 
-from motor_comp.errors import ParameterError, check_positive
+from motor_comp.errors import ParameterError, check_nonnegative, check_positive
 from motor_comp.physics.effects.base import Effect
 from motor_comp.physics.effects.stribeck import stribeck_curve
 
@@ -31,19 +50,19 @@ MAX_ELEMENTS = 8
 
 
 @njit(cache=True)
-def gms_update(forces, slip, alpha, k, c, dx, v, s_v, dt):
-    """Advance every element by one step, in place; return the summed element force [N].
+def gms_update(forces, slip, alpha, k, sigma, C, dx, v, s_v, dt):
+    """Advance every element by one step, in place; return the GMS friction force [N].
 
     Parameters
     ----------
     forces : ndarray
-        Element forces ``F_i`` [N] (updated).
+        Element spring forces ``F_i = k_i·z_i`` [N] (updated).
     slip : ndarray
         Element phase: 0 sticking, ±1 slipping in that direction (updated).
-    alpha, k : ndarray
-        Normalised slip limits [-] and stiffnesses [N/m].
-    c : float
-        Slip attraction rate [1/s].
+    alpha, k, sigma : ndarray
+        Normalised slip limits [-], stiffnesses [N/m], micro-damping [N·s/m].
+    C : float
+        Constant attraction of the slip phase [N/s] (Lampaert 2003).
     dx : float
         Displacement during the step [m].
     v : float
@@ -51,29 +70,39 @@ def gms_update(forces, slip, alpha, k, c, dx, v, s_v, dt):
     s_v : float
         Signed Stribeck curve at ``v`` [N].
     dt : float
-        Step [s].
+        Step [s], > 0.
+
+    Returns
+    -------
+    float
+        ``Σ (F_i + σ_i·ż_i)`` [N] with ``ż_i = ΔF_i/(k_i·dt)`` over the step.
     """
-    return gms_step(forces, 0, slip, 0, alpha, 0, k, 0, alpha.shape[0], np.exp(-c * dt),
+    return gms_step(forces, 0, slip, 0, alpha, 0, k, 0, sigma, 0, alpha.shape[0], C, dt,
                     dx, v, s_v)
 
 
-@njit(cache=True)
-def gms_step(forces, i_f, slip, i_s, alpha, i_a, k, i_k, n, decay, dx, v, s_v):
+@njit(cache=True, error_model='numpy')
+def gms_step(forces, i_f, slip, i_s, alpha, i_a, k, i_k, sigma, i_g, n, C, dt, dx, v, s_v):
     """Apply the element law of :func:`gms_update` to packed vectors with offsets.
 
     ``F_i = forces[i_f + i]``, phase ``slip[i_s + i]``, ``α_i = alpha[i_a + i]``,
-    ``k_i = k[i_k + i]``; ``decay = e^{−c·dt}`` of the slip phase.  The plant kernel calls
-    this with its parameter and state vectors and offsets (no array views in its inner
-    loop, and the exponential hoisted out of the step loop); :func:`gms_update` with
-    the element arrays themselves.  Returns the summed element force [N].
+    ``k_i = k[i_k + i]``, ``σ_i = sigma[i_g + i]``, ``i < n``; ``C`` [N/s] the attraction,
+    ``dt`` [s] the step (``dt = 0``: no relaxation and no micro-damping term).  The
+    plant kernel and the friction feedforward call this with
+    their parameter and state vectors and offsets (no array views in their inner loops);
+    :func:`gms_update` with the element arrays themselves.  Returns the friction
+    ``Σ (F_i + σ_i·ΔF_i/(k_i·dt))`` [N].
     """
     total = 0.0
     sv = np.sign(v)
+    decay = -1.0                  # e^{−C·dt/|s|}, computed once if an element slips
+    inv_dt = 1.0 / dt if dt > 0.0 else 0.0   # a zero-length step has no deflection rate
     for i in range(n):
+        f_old = forces[i_f + i]
         if slip[i_s + i] != 0.0 and sv != slip[i_s + i]:
             slip[i_s + i] = 0.0  # velocity reversal (or rest): the element sticks again
         if slip[i_s + i] == 0.0:
-            f = forces[i_f + i] + k[i_k + i] * dx
+            f = f_old + k[i_k + i] * dx
             lim = alpha[i_a + i] * abs(s_v)
             # slip starts when F_i reaches α_i·s(v) in the direction of motion (Chiew
             # eq. 3–4).  An element still loaded against the motion (after a reversal
@@ -86,15 +115,35 @@ def gms_step(forces, i_f, slip, i_s, alpha, i_a, k, i_k, n, decay, dx, v, s_v):
                 slip[i_s + i] = sv
             forces[i_f + i] = f
         else:
+            if decay < 0.0:
+                # the published slip law: relaxation rate C/|s(v)| [1/s]
+                decay = np.exp(-C * dt / abs(s_v)) if s_v != 0.0 else 0.0
             target = alpha[i_a + i] * s_v
-            forces[i_f + i] = target - (target - forces[i_f + i]) * decay
-        total += forces[i_f + i]
+            forces[i_f + i] = target - (target - f_old) * decay
+        f_new = forces[i_f + i]
+        total += f_new + sigma[i_g + i] * (f_new - f_old) / k[i_k + i] * inv_dt
     return total
 
 
+@njit(cache=True, inline='always', error_model='numpy')
+def gms_slip_rate(f, alpha, C, s_v):
+    """Spring-force rate ``dF_i/dt`` [N/s] of a slipping element (Lampaert 2003).
+
+    ``sgn(v)·C·(α_i − F_i/s(v)) = (C/|s|)·(α_i·s − F_i)`` with the signed ``s_v`` [N];
+    0 when ``s_v = 0`` (no friction level: the element carries nothing).
+    """
+    if s_v == 0.0:
+        return 0.0
+    return C / abs(s_v) * (alpha * s_v - f)
+
+
 @njit(cache=True)
-def gms_trajectory(x, alpha, k, c, fc, fs, vs, delta, dt):
-    """GMS element force [N] along a sampled displacement ``x`` [m] at step ``dt`` [s]."""
+def gms_trajectory(x, alpha, k, sigma, C, fc, fs, vs, delta, dt):
+    """GMS friction [N] along a sampled displacement ``x`` [m] at step ``dt`` [s].
+
+    ``s(v)`` is evaluated at each step's mean velocity ``Δx/dt``; the elements start
+    relaxed at the first sample.
+    """
     n = x.shape[0]
     out = np.zeros(n)
     forces = np.zeros(alpha.shape[0])
@@ -103,7 +152,7 @@ def gms_trajectory(x, alpha, k, c, fc, fs, vs, delta, dt):
         dx = x[j] - x[j - 1]
         v = dx / dt
         s_v = stribeck_curve(v, fc, fs, vs, delta)
-        out[j] = gms_update(forces, slip, alpha, k, c, dx, v, s_v, dt)
+        out[j] = gms_update(forces, slip, alpha, k, sigma, C, dx, v, s_v, dt)
     return out
 
 
@@ -117,52 +166,144 @@ class Presliding(Effect):
         Normalised element slip limits [-], each > 0, summing to 1.
     k : tuple of float
         Element stiffnesses [N/m], each > 0; the pre-sliding stiffness at a reversal is Σk.
-    c : float
-        Slip attraction rate [1/s] (Chiew: C = 1/Vs), > 0.
+    C : float
+        Constant attraction of the slip phase [N/s], > 0 (Lampaert 2003): an element
+        relaxes towards ``α_i·s(v)`` at the rate ``C/|s(v)|`` [1/s].
+    sigma : tuple of float
+        Element micro-damping ``σ_i`` [N·s/m], each >= 0, one per element; empty (the
+        default) means none.  :meth:`damping_ratio` gives the ζ it lends the pre-sliding
+        resonance of an axis, :meth:`with_damping_ratio` the σ_i for a wanted ζ.
     """
 
     name = 'presliding'
     title = 'pre-sliding hysteresis (GMS)'
     alpha: tuple = (0.45, 0.30, 0.15, 0.10)
     k: tuple = (8e6, 3e6, 1e6, 3e5)
-    c: float = 1000.0
+    C: float = 12000.0
+    sigma: tuple = ()
 
     def __post_init__(self) -> None:
         try:
             alpha = tuple(float(a) for a in self.alpha)
             k = tuple(float(s) for s in self.k)
+            sigma = tuple(float(s) for s in self.sigma)
         except (TypeError, ValueError):
-            raise ParameterError('presliding.alpha and presliding.k must be lists of numbers') \
-                from None
+            raise ParameterError('presliding.alpha, presliding.k and presliding.sigma must '
+                                 'be lists of numbers') from None
         if not 1 <= len(alpha) <= MAX_ELEMENTS:
             raise ParameterError(
                 f'presliding.alpha must have 1..{MAX_ELEMENTS} elements, got {len(alpha)}')
         if len(k) != len(alpha):
             raise ParameterError(
                 f'presliding.k has {len(k)} elements but alpha has {len(alpha)}')
+        if not sigma:
+            sigma = (0.0,) * len(alpha)
+        if len(sigma) != len(alpha):
+            raise ParameterError(
+                f'presliding.sigma has {len(sigma)} elements but alpha has {len(alpha)}')
         for i, a in enumerate(alpha):
             check_positive(f'presliding.alpha[{i}] [-]', a)
         for i, s in enumerate(k):
             check_positive(f'presliding.k[{i}] [N/m]', s)
+        for i, s in enumerate(sigma):
+            check_nonnegative(f'presliding.sigma[{i}] [N·s/m]', s)
         if abs(sum(alpha) - 1.0) > 1e-6:
             raise ParameterError(f'presliding.alpha must sum to 1, got {sum(alpha):.6g}')
         object.__setattr__(self, 'alpha', alpha)
         object.__setattr__(self, 'k', k)
-        object.__setattr__(self, 'c', check_positive('presliding.c [1/s]', self.c))
+        object.__setattr__(self, 'sigma', sigma)
+        object.__setattr__(self, 'C', check_positive('presliding.C [N/s]', self.C))
+
+    @classmethod
+    def from_params(cls, params: Mapping[str, Any] | None) -> 'Presliding':
+        """Build from model-file parameters; the pre-published key ``c`` is refused here.
+
+        Model and plant files are converted first by :func:`upgrade_legacy_params`, which
+        knows the model's ``fc``; an effect built on its own cannot convert ``c``.
+        """
+        if params is not None and 'c' in params:
+            raise ParameterError(LEGACY_C_MESSAGE)
+        return super().from_params(params)  # type: ignore[return-value]
 
     @property
     def stiffness(self) -> float:
         """Pre-sliding stiffness at a reversal, Σ k_i [N/m]."""
         return float(sum(self.k))
 
+    def damping_ratio(self, mass: float, other_damping: float = 0.0) -> float:
+        """ζ of the pre-sliding resonance of an axis of ``mass`` [kg] with all elements stuck.
+
+        Near rest every element sticks, so the axis is ``M·ẍ + (Σσ_i + d)·ẋ + Σk_i·x = f``
+        with ``d = other_damping`` [N·s/m] (the drive's ``damping`` plus ``viscous.fv``):
+        ``ω_n = sqrt(Σk_i/M)``, ``ζ = (Σσ_i + d)/(2·sqrt(Σk_i·M))``.
+        """
+        mass = check_positive('mass [kg]', mass)
+        return (sum(self.sigma) + other_damping) / (2.0 * math.sqrt(self.stiffness * mass))
+
+    def with_damping_ratio(self, zeta: float, mass: float,
+                           other_damping: float = 0.0) -> 'Presliding':
+        """Copy with ``σ_i ∝ k_i`` such that :meth:`damping_ratio` is ``zeta``.
+
+        Stiffness-proportional damping (``σ_i = k_i·T``, one time constant T for all
+        elements) damps each element's share of the resonance alike.
+        """
+        need = 2.0 * check_positive('zeta', zeta) * math.sqrt(self.stiffness * mass) \
+            - other_damping
+        if need < 0.0:
+            raise ParameterError(f'the axis damping alone gives zeta > {zeta:g}')
+        t = need / self.stiffness
+        return dataclasses.replace(self, sigma=tuple(s * t for s in self.k))
+
     def force_along(self, x: np.ndarray, dt: float, *, fc: float, fs: float | None = None,
                     vs: float = 1e-3, delta: float = 1.0) -> np.ndarray:
-        """Element force [N] along displacement samples ``x`` [m] spaced ``dt`` [s].
+        """GMS friction ``Σ(F_i + σ_i·ż_i)`` [N] along samples ``x`` [m] spaced ``dt`` [s].
 
         The element state starts relaxed at the first sample; ``fc``/``fs``/``vs``/``delta``
         define the Stribeck curve (``fs`` defaults to ``fc``: no Stribeck effect).
         """
         fs = fc if fs is None else fs
         return gms_trajectory(np.ascontiguousarray(x, dtype=float),
-                              np.array(self.alpha), np.array(self.k), self.c,
-                              float(fc), float(fs), float(vs), float(delta), float(dt))
+                              np.array(self.alpha), np.array(self.k), np.array(self.sigma),
+                              self.C, float(fc), float(fs), float(vs), float(delta),
+                              float(dt))
+
+
+#: the one-line message for the pre-published slip-rate key in a stand-alone effect
+LEGACY_C_MESSAGE = ("presliding: 'c' [1/s] (old slip rate) was replaced by 'C' [N/s], "
+                    "Lampaert's constant attraction (rate C/|s(v)|); use C = c·fc")
+
+
+def upgrade_legacy_params(effects: Mapping[str, Any]) -> tuple[dict[str, Any], str | None]:
+    """Convert a pre-published ``presliding.c`` [1/s] in a model file's ``effects`` mapping.
+
+    The old slip law relaxed at the constant rate ``c``; the published one at
+    ``C/|s(v)|``.  ``C = c·fc`` (``fc`` from the file's ``coulomb``) keeps the rate at
+    sliding speeds, where ``|s(v)| = fc``, and makes it slower near break-away as
+    published.  Returns the (possibly) converted mapping and a one-line note for the
+    user, or None when nothing was converted.  Raises :class:`ParameterError` when ``c``
+    cannot be converted (no ``coulomb.fc``, or both ``c`` and ``C`` given).
+    """
+    gms = effects.get('presliding') if isinstance(effects, Mapping) else None
+    if not isinstance(gms, Mapping) or 'c' not in gms:
+        return dict(effects) if isinstance(effects, Mapping) else effects, None
+    if 'C' in gms:
+        raise ParameterError("presliding: give either 'C' [N/s] or the old 'c' [1/s], "
+                             "not both")
+    coulomb = effects.get('coulomb')
+    fc = coulomb.get('fc') if isinstance(coulomb, Mapping) else None
+    try:
+        fc = float(fc)
+        c = float(gms['c'])
+    except (TypeError, ValueError):
+        raise ParameterError(LEGACY_C_MESSAGE + ' (no coulomb.fc in this file to convert '
+                             'with)') from None
+    if not fc > 0.0:
+        raise ParameterError(LEGACY_C_MESSAGE + ' (coulomb.fc must be > 0 to convert)')
+    new = {key: val for key, val in gms.items() if key != 'c'}
+    new['C'] = c * fc
+    out = dict(effects)
+    out['presliding'] = new
+    note = (f"presliding.c = {c:g} 1/s is the old slip rate; read as C = c·fc = "
+            f"{c * fc:g} N/s (Lampaert's constant attraction, rate C/|s(v)|); write "
+            f"'C: {c * fc:g}' in the file to silence this")
+    return out, note

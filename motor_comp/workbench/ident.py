@@ -1,0 +1,1323 @@
+"""Joint inverse-dynamic-model identification (IDIM-LS) with variable projection.
+
+``F_in(u(t − τ)) = M·ẍ + Σ_g Φ_g(x, ẋ; η_g)·θ_g`` (``../shared/IDENTIFICATION.md`` §1;
+Gautier & Janot's IDIM-LS for robot joints and EMPS-class axes): every effect is a
+*group of named columns* of one regressor matrix (PySINDy-style libraries that
+compose), and every coefficient that enters linearly — mass/inertia, ``fc``, ``fv``,
+``fs − fc``, ripple harmonics, offset, spring, asymmetry, gravity ``mgl·cos q0`` and
+``−mgl·sin q0`` — is re-estimated *together* each time the effect set changes.
+Nonlinear parameters ``η`` (ripple period and harmonic count, Stribeck ``vs``/``δ``,
+delay ``τ``, backlash width, GMS distance scale and ``c``) are searched by
+variable projection (Golub & Pereyra 1973): at each trial ``η`` the linear part is
+re-solved, so the search is over 1–2 numbers, never over everything.
+
+Validation (§4): the sliding samples are cut into many short blocks (0.25–2 s) assigned
+to folds round-robin, so every fold covers every regime of a time-ordered experiment
+(a slow→fast sweep included); training excludes one filter half-width next to each
+held-out block (hv-block CV, Racine 2000).  Per-block Gram matrices make a held-out
+score a few small solves; data-driven choices (period, harmonic count, Stribeck basin,
+delay, GMS distance scale, gap width) are made inside each fold from its training blocks.
+
+Uncertainty (§5): a cluster-robust (block) sandwich covariance over the same blocks —
+residuals are coloured, so ``σ²(ΦᵀΦ)⁻¹`` is too small — with the nonlinear parameters
+entering through their Gauss–Newton (linearised) columns; derived parameters (``x0``,
+``fs``, ``mgl``/``q0``, …) by the delta method.  Correlations near ±1 name the pairs
+this run cannot separate (§6).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, Callable, Sequence
+
+import numpy as np
+from scipy.optimize import minimize, minimize_scalar
+from scipy.signal import savgol_coeffs
+
+from motor_comp.errors import ParameterError
+from motor_comp.physics.axis import AxisModel
+from motor_comp.physics.effects import make_effect
+from motor_comp.physics.effects.presliding import gms_trajectory
+from motor_comp.physics.effects.stribeck import stribeck_shape
+from motor_comp.workbench.derivatives import Kinematics
+from motor_comp.workbench.residual import motor_position, sliding_mask
+
+#: the moving mass/inertia: always a column (unless the run does not excite it)
+MASS = 'mass'
+#: candidates the selection may add (vocabulary order); gravity only on rotary axes
+LINEAR = ('coulomb', 'viscous', 'offset', 'spring', 'asymmetry', 'gravity')
+NONLINEAR = ('stribeck', 'presliding', 'ripple', 'delay', 'backlash')
+ORDER = ('coulomb', 'viscous', 'stribeck', 'presliding', 'ripple', 'offset', 'spring',
+         'asymmetry', 'delay', 'backlash', 'gravity')
+#: least share of the sliding samples in the minority direction for the runs to count as
+#: moving both ways: below it the backward samples are jitter of a one-way run, not a
+#: second direction of sliding (a Coulomb force does not flip on them)
+MIN_DIRECTION_SHARE = 0.05
+#: the largest number of ripple harmonics
+MAX_HARMONICS = 6
+#: widest backlash gap searched [m or rad]
+MAX_BACKLASH = 0.01
+#: pre-sliding distances of the GMS element columns, relative to the searched scale
+#: ``d0``: the element distribution (how much of the friction level each distance
+#: carries) is then linear and fitted jointly, so the element count and split are
+#: estimated, not assumed (unused distances get no weight)
+GMS_DISTANCES = (0.3, 1.0, 3.0)
+
+
+def fit_rows_mask(kin: Kinematics, *, min_stop: int = 3, half: int | None = None) \
+        -> np.ndarray:
+    """Sliding samples whose smoothing window does not reach into a stop.
+
+    A stopped (stuck) axis carries whatever friction balances the drive, so no
+    sliding law explains it (``../shared/IDENTIFICATION.md`` §2); with a smoothing
+    window every sample within half a window of a stop mixes that force in.  Stops
+    are runs of at least ``min_stop`` samples below the sliding threshold; a plain
+    zero crossing of the velocity at a reversal (one or two samples) is kept, since
+    pre-sliding and backlash live there (the workbench uses half a smoother length as
+    ``min_stop``: a gap crossing or a short stick at a reversal stays in).
+    """
+    m = sliding_mask(kin)
+    still = ~m
+    d = np.diff(np.concatenate([[0], still.astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    half = kin.window // 2 if half is None else int(half)
+    out = m.copy()
+    for a, b in zip(starts, stops):
+        if b - a >= min_stop:
+            out[max(a - half, 0):b + half] = False
+    return out
+
+
+# ------------------------------------------------------------------------------------
+# data: one or several runs, decimated sliding rows, hv-blocks
+# ------------------------------------------------------------------------------------
+@dataclasses.dataclass
+class _RunPart:
+    kin: Kinematics
+    rows: np.ndarray            # indices into the run's full-rate arrays
+    W: int                      # smoother length [samples] (odd)
+    xs: np.ndarray              # S(motor position) at full rate (linear columns)
+    x: np.ndarray               # pointwise motor position / velocity for the nonlinear
+    v: np.ndarray               # laws (backlash changes them)
+
+
+class Data:
+    """One identification experiment: the sliding samples of one or more runs.
+
+    Parameters
+    ----------
+    kins : sequence of Kinematics
+        The runs (one experiment, one model).
+    model : AxisModel
+        Supplies the drive constants (``input_gain``, ``back_emf``, ``damping``).
+    folds : int
+        Number of folds the blocks are dealt to (round-robin).
+    block_s : float, optional
+        Block length [s]; default from the record length (0.25–2 s).
+    """
+
+    def __init__(self, kins: Sequence[Kinematics], model: AxisModel, *, folds: int = 5,
+                 block_s: float | None = None) -> None:
+        if folds < 2:
+            raise ParameterError(f'folds must be >= 2, got {folds}')
+        self.kins = list(kins)
+        self.model = model
+        self.folds = int(folds)
+        self.parts: list[_RunPart] = []
+        total = sum(k.duration for k in self.kins)
+        if block_s is None:
+            block_s = float(np.clip(total / (10.0 * folds), 0.25, 2.0))
+        run_id, blk, t_rows, head_tail = [], [], [], []
+        nblk = 0
+        n_full = 0.0
+        for i, kin in enumerate(self.kins):
+            W = smoother_length(kin)
+            mask = fit_rows_mask(kin, half=W // 2, min_stop=3)
+            mask[:W // 2 + 2] = False
+            mask[len(kin) - W // 2 - 2:] = False
+            step = max(1, W // 8)
+            keep = np.zeros(len(kin), dtype=bool)
+            keep[::step] = True
+            rows = np.flatnonzero(mask & keep)
+            xs = _smooth_full(kin.position, W)
+            vp = _point_velocity(kin, kin.position)
+            self.parts.append(_RunPart(kin, rows, W, xs, kin.x, vp))
+            # independent samples: Σb² of the normalised kernel per sample
+            n_full += len(rows) * step * float(np.sum(_kernel(W) ** 2))
+            t = kin.t[rows] - kin.t[0]
+            b = np.floor(t / block_s).astype(int)
+            # position of each row inside its block, for the hv gap
+            half = 0.5 * W * kin.dt
+            b_lo = b * block_s
+            b_hi = (b + 1) * block_s
+            ht = np.where(t - b_lo < half, 0, np.where(b_hi - t <= half, 2, 1))
+            blk.append(b + nblk)
+            nblk += int(b.max()) + 1 if len(b) else 0
+            run_id.append(np.full(len(rows), i))
+            t_rows.append(t)
+            head_tail.append(ht)
+        self.run_id = np.concatenate(run_id)
+        block = np.concatenate(blk)
+        ht = np.concatenate(head_tail)
+        if len(block) == 0:
+            raise ParameterError('no sliding samples in the run(s): the axis does not move')
+        # renumber the non-empty blocks in time order; deal them to folds round-robin
+        _, block = np.unique(block, return_inverse=True)
+        self.block = block
+        self.n_blocks = int(block.max()) + 1
+        self.block_fold = np.arange(self.n_blocks) % self.folds
+        self.fold = self.block_fold[block]
+        # parts: (block, head/core/tail); rows are in time order so parts are contiguous
+        part_key = block * 3 + ht
+        change = np.flatnonzero(np.diff(part_key)) + 1
+        self.starts = np.concatenate([[0], change])
+        self.part_block = block[self.starts]
+        self.part_pos = ht[self.starts]
+        self.n = len(block)
+        self._train_parts = []
+        for f in range(self.folds):
+            tr = self.block_fold[self.part_block] != f
+            prev_f = np.roll(self.block_fold, 1)[self.part_block]
+            next_f = np.roll(self.block_fold, -1)[self.part_block]
+            # hv gap: a training block's edge next to a held-out block is left out
+            tr &= ~((self.part_pos == 0) & (prev_f == f) & (self.part_block > 0))
+            tr &= ~((self.part_pos == 2) & (next_f == f)
+                    & (self.part_block < self.n_blocks - 1))
+            self._train_parts.append(tr)
+        self._test_parts = [self.block_fold[self.part_block] == f for f in range(self.folds)]
+        self.n_eff = max(n_full, 2.0)
+        v = np.concatenate([np.asarray(p.v)[p.rows] for p in self.parts])
+        n_pos, n_neg = int(np.count_nonzero(v > 0)), int(np.count_nonzero(v < 0))
+        #: share of the sliding samples in the less frequent direction (0–0.5)
+        self.minority_share = min(n_pos, n_neg) / max(n_pos + n_neg, 1)
+        #: +1/−1 when the runs slide one way only (``MIN_DIRECTION_SHARE``), else 0
+        self.direction = (0 if self.minority_share >= MIN_DIRECTION_SHARE
+                          else (1 if n_pos >= n_neg else -1))
+        self.window = max(p.W for p in self.parts)
+        self.tau0 = 0.0
+        self.width0 = 0.0
+        self._cache: dict = {}
+        self._a = None
+
+    # -- signals at the rows ------------------------------------------------------
+    def vl(self) -> np.ndarray:
+        """Velocity ``S(ẋ)`` at the rows: the exact derivative of the smoothed position.
+
+        The smoothing ``S`` commutes with differentiation, so a difference quotient of
+        ``S x`` is the velocity smoothed by the *same* filter as the force — unlike a
+        Savitzky–Golay derivative filter, whose response differs from the smoother's
+        and biases the linear coefficients (the mass most, and a delay with it).
+        """
+        return self.smooth_gather(None, ('vl',))
+
+    def al(self) -> np.ndarray:
+        """Acceleration ``S(ẍ)`` at the rows (second difference of the smoothed position)."""
+        return self.smooth_gather(None, ('al',))
+
+    def gather(self, fn: Callable[[_RunPart], np.ndarray]) -> np.ndarray:
+        """Concatenate ``fn(run)[run.rows]`` over the runs (full-rate arrays)."""
+        return np.concatenate([np.asarray(fn(p))[p.rows] for p in self.parts])
+
+    def smooth_gather(self, fn: Callable[[_RunPart], np.ndarray],
+                      key: tuple | None = None) -> np.ndarray:
+        """Like :meth:`gather`, smoothing ``fn(run)`` with the run's filter.
+
+        The zero-phase Savitzky–Golay smoothing is evaluated at the rows only (a dot
+        product with the filter's coefficients over each row's window: the rows are
+        decimated and never within a window of the record's ends).  With ``key`` the
+        result is cached (per backlash width): the columns of the effects not being
+        searched are computed once, not at every trial.
+        """
+        if key is not None:
+            k = key + (self.width0,)
+            hit = self._cache.get(k)
+            if hit is not None:
+                return hit
+        if key is not None and key[0] in ('vl', 'al'):
+            out = np.concatenate([_stencil(p, key[0]) for p in self.parts])
+        else:
+            out = np.concatenate([_smooth_at(p, np.asarray(fn(p), dtype=float))
+                                  for p in self.parts])
+        if key is not None:
+            if len(self._cache) > 400:
+                self._cache.clear()
+            self._cache[k] = out
+        return out
+
+    def y(self, tau: float) -> np.ndarray:
+        """Smoothed drive force at the rows with input delay ``tau`` [s] (moving part)."""
+        m = self.model
+        k = m.input_gain * m.back_emf + m.damping
+        # the exact delayed command (held or sampled) smoothed at the rows: shifting the
+        # smoothed signal instead would low-pass the smoother's leakage differently
+        g = m.input_gain
+        w = self.smooth_gather(lambda p: g * p.kin.input_at(float(tau)), ('u', float(tau)))
+        return w - k * self.vl() if k else w
+
+    def f_in_scale(self) -> float:
+        """``Σ(F_in − mean)²`` over the rows (the NRMSE denominator)."""
+        y = self.y(self.tau0)
+        return float(np.sum((y - y.mean()) ** 2))
+
+    def set_backlash(self, width: float, model: AxisModel) -> None:
+        """Replace the motion by the motor position reconstructed across a gap."""
+        self.width0 = float(width)
+        for p in self.parts:
+            if width <= 0:
+                p.x, p.v = p.kin.x, _point_velocity(p.kin, p.kin.position)
+                p.xs = _smooth_full(p.kin.position, p.W)
+                continue
+            shift = int(round(self.tau0 / p.kin.dt))
+            u = p.kin.u
+            u_hold = np.concatenate([np.full(shift, u[0]), u[:len(u) - shift]])
+            xm = motor_position(p.kin, width, model.without('backlash', 'delay'), u_hold)
+            p.x = _derivatives(p.kin, xm)[0]
+            p.v = _point_velocity(p.kin, xm)
+            p.xs = _smooth_full(xm, p.W)
+
+    # -- Gram matrices per part ---------------------------------------------------
+    def part_grams(self, Z: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
+        """Per-part ``Zᵀ W`` (``W`` defaults to ``Z``): shape (parts, q, r)."""
+        W = Z if W is None else W
+        prod = np.einsum('ni,nj->nij', Z, W)
+        return np.add.reduceat(prod, self.starts, axis=0)
+
+    def train(self, P: np.ndarray, f: int) -> np.ndarray:
+        """Sum of the training parts of fold ``f``."""
+        return P[self._train_parts[f]].sum(axis=0)
+
+    def test(self, P: np.ndarray, f: int) -> np.ndarray:
+        """Sum of the held-out parts of fold ``f``."""
+        return P[self._test_parts[f]].sum(axis=0)
+
+    def train_rows(self, f: int) -> np.ndarray:
+        """Boolean row mask of fold ``f``'s training samples."""
+        part_of_row = np.repeat(np.arange(len(self.starts)),
+                                np.diff(np.append(self.starts, self.n)))
+        return self._train_parts[f][part_of_row]
+
+
+def _coeffs(window: int, polyorder: int, deriv: int = 0) -> np.ndarray:
+    key = (window, polyorder, deriv)
+    c = _COEFFS.get(key)
+    if c is None:
+        c = savgol_coeffs(window, polyorder, deriv=deriv, use='dot')
+        _COEFFS[key] = c
+    return c
+
+
+_COEFFS: dict = {}
+
+
+def _kernel(W: int) -> np.ndarray:
+    """Return the smoother ``S``: a normalised Blackman window of ``W`` samples.
+
+    Only its stop band matters (the same ``S`` is applied to the drive force and to
+    every column, so the pass band's shape cancels): the Blackman window's sidelobes
+    are below −58 dB, so the second difference of ``S x`` — which multiplies the
+    position noise by ω² — stays quiet, where a Savitzky–Golay smoother leaks.
+    """
+    key = ('blackman', W)
+    b = _COEFFS.get(key)
+    if b is None:
+        b = np.blackman(W + 2)[1:-1]
+        b = b / b.sum()
+        _COEFFS[key] = b
+    return b
+
+
+def smoother_length(kin: Kinematics) -> int:
+    """Length of ``S`` [samples]: twice the derivative window (the same time scale)."""
+    return 2 * (kin.window // 2) * 2 + 1
+
+
+def _smooth_full(y: np.ndarray, W: int) -> np.ndarray:
+    from scipy.ndimage import correlate1d
+    return correlate1d(np.asarray(y, dtype=float), _kernel(W), mode='mirror')
+
+
+def _smooth_at(p: _RunPart, y: np.ndarray) -> np.ndarray:
+    """``S(y)`` at the rows (1-D or 2-D ``y``, time along the first axis)."""
+    from scipy.ndimage import correlate1d
+    return correlate1d(np.asarray(y, dtype=float), _kernel(p.W), axis=0,
+                       mode='mirror')[p.rows]
+
+
+def _stencil(p: _RunPart, which: str) -> np.ndarray:
+    """Central first / second difference of the smoothed position at the rows.
+
+    The 3-point second difference of a trajectory driven by a zero-order-hold force
+    is exactly ``dt²·(a_{k−1} + a_k)/2`` — the same half-sample average
+    :meth:`Kinematics.input_at` gives the held command — so the acceleration and the
+    drive force see the same kernel at every frequency, not only in the smoother's
+    pass band (a Savitzky–Golay filter leaks above it).
+    """
+    x, r, dt = p.xs, p.rows, p.kin.dt
+    if which == 'vl':
+        return (x[r + 1] - x[r - 1]) / (2 * dt)
+    return (x[r + 1] - 2 * x[r] + x[r - 1]) / (dt * dt)
+
+
+def _point_velocity(kin: Kinematics, x: np.ndarray) -> np.ndarray:
+    """Pointwise velocity for the nonlinear laws (sign, Stribeck, GMS direction).
+
+    A short Savitzky–Golay derivative (a third of the derivative window, order 2): the
+    sign of the velocity decides the friction direction at every reversal, and a long
+    window moves the sign change — measured on the project's closed loop, the 21-sample
+    derivative shifted the Coulomb switching enough to bias a dead time by +1.2 ms.
+    """
+    from scipy.ndimage import correlate1d
+    w = max(5, (kin.window // 3) | 1)
+    return correlate1d(np.asarray(x, dtype=float), _coeffs(w, 2, 1), mode='mirror') / kin.dt
+
+
+def _derivatives(kin: Kinematics, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pointwise (Savitzky–Golay) position and velocity of another position signal."""
+    from scipy.ndimage import correlate1d
+    w, o = kin.window, kin.polyorder
+    return (correlate1d(x, _coeffs(w, o, 0), mode='mirror'),
+            correlate1d(x, _coeffs(w, o, 1), mode='mirror') / kin.dt)
+
+
+# ------------------------------------------------------------------------------------
+# least squares on an augmented Gram [X y]ᵀ[X y]
+# ------------------------------------------------------------------------------------
+def solve_gram(G: np.ndarray) -> tuple[np.ndarray, float]:
+    """θ and SSE from an augmented Gram ``[X y]ᵀ[X y]`` (tiny ridge, column-scaled)."""
+    p = G.shape[0] - 1
+    if p == 0:
+        return np.zeros(0), float(G[0, 0])
+    A = G[:p, :p]
+    b = G[:p, p]
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    As = A / np.outer(d, d)
+    try:
+        th = np.linalg.solve(As + 1e-10 * np.eye(p), b / d) / d
+    except np.linalg.LinAlgError:
+        th = np.linalg.lstsq(As, b / d, rcond=None)[0] / d
+    sse = float(G[p, p] - 2.0 * th @ b + th @ A @ th)
+    return th, max(sse, 0.0)
+
+
+def _sse_with(G: np.ndarray, th: np.ndarray) -> float:
+    p = len(th)
+    return max(float(G[p, p] - 2.0 * th @ G[:p, p] + th @ G[:p, :p] @ th), 0.0)
+
+
+# ------------------------------------------------------------------------------------
+# groups of columns
+# ------------------------------------------------------------------------------------
+@dataclasses.dataclass
+class Spec:
+    """An effect set with its nonlinear parameters: what a design is built from.
+
+    Parameters
+    ----------
+    names : tuple of str
+        Effects present (vocabulary names).
+    eta : dict
+        Nonlinear parameters per effect: ripple ``(period, H)``, stribeck ``(vs, δ)``,
+        presliding ``(distances, c, Stribeck ratio)``, delay ``τ``, backlash width.
+    mass_free : bool
+        Whether the mass is a column (else fixed at ``mass``).
+    mass : float
+        The fixed mass when not free [kg or kg·m²].
+    """
+
+    names: tuple
+    eta: dict
+    mass_free: bool = True
+    mass: float = 1.0
+
+    def with_(self, name: str, eta: Any = None) -> 'Spec':
+        """Return a copy with ``name`` added (and its nonlinear parameters)."""
+        e = dict(self.eta)
+        if eta is not None:
+            e[name] = eta
+        names = tuple(n for n in ORDER if n in set(self.names) | {name})
+        return Spec(names, e, self.mass_free, self.mass)
+
+    def without(self, name: str) -> 'Spec':
+        """Return a copy without ``name``."""
+        e = {k: v for k, v in self.eta.items() if k != name}
+        return Spec(tuple(n for n in self.names if n != name), e, self.mass_free, self.mass)
+
+
+def _sgn(v: np.ndarray) -> np.ndarray:
+    return np.sign(v)
+
+
+def gms_column(p: _RunPart, d: float, c: float, ratio: float, vs: float,
+               delta: float) -> np.ndarray:
+    """Force of one Maxwell-slip element per newton of its slip limit along a run.
+
+    An element of slip limit ``β·s(v)/fc`` and stiffness ``β/d`` (pre-sliding distance
+    ``d`` [m]) gives exactly ``β`` times this column: with the distances held, the
+    GMS force ``Σ β_j·g_j`` is linear in the element levels ``β_j`` (Lampaert 2003;
+    Chiew eq. 3–5), their sum is the Coulomb level ``fc``, ``α_j = β_j/fc``,
+    ``k_j = β_j/d_j``.  The published slip law's attraction ``C = c·fc`` keeps the
+    unit-level column homogeneous.
+    """
+    return gms_trajectory(np.ascontiguousarray(p.x), np.ones(1), np.array([1.0 / d]),
+                          np.zeros(1), float(c), 1.0, 1.0 + ratio, float(vs), float(delta),
+                          p.kin.dt)
+
+
+def columns(D: Data, spec: Spec) -> tuple[np.ndarray, list[tuple[str, str]]]:
+    """Regressor matrix of ``spec`` at the rows and its column labels (group, name)."""
+    cols: list[np.ndarray] = []
+    labels: list[tuple[str, str]] = []
+    names = set(spec.names)
+
+    def add(group: str, label: str, c: np.ndarray) -> None:
+        cols.append(np.asarray(c, dtype=float))
+        labels.append((group, label))
+
+    if spec.mass_free:
+        add(MASS, 'mass', D.al())
+    gms = 'presliding' in names
+    st = spec.eta.get('stribeck')
+    if 'coulomb' in names:
+        if gms:
+            dists, c, ratio = spec.eta['presliding']
+            vs, dl = st if (st is not None and 'stribeck' in names) else (1e-3, 1.0)
+            ratio = ratio if 'stribeck' in names else 0.0
+            for j, d in enumerate(dists):
+                add('presliding', f'b{j}', D.smooth_gather(
+                    lambda p, d=d: gms_column(p, d, c, ratio, vs, dl),
+                    ('gms', d, c, ratio, vs, dl)))
+        elif D.direction:
+            # one-way runs: the friction opposes the one direction of sliding throughout
+            add('coulomb', 'fc', np.full(D.n, float(D.direction)))
+        else:
+            add('coulomb', 'fc', D.smooth_gather(lambda p: _sgn(p.v), ('sgn',)))
+    if 'viscous' in names:
+        add('viscous', 'fv', D.vl())
+    if 'stribeck' in names and not gms:
+        vs, dl = st
+        add('stribeck', 'dfs', D.smooth_gather(
+            lambda p: stribeck_shape(p.v / vs, dl) * _sgn(p.v), ('stribeck', vs, dl)))
+    if 'ripple' in names:
+        period, nh = spec.eta['ripple']
+        for h in range(1, int(nh) + 1):
+            w = 2 * math.pi * h / period
+            add('ripple', f'a{h}', D.smooth_gather(lambda p, w=w: np.sin(w * p.x),
+                                                   ('sin', w)))
+            add('ripple', f'b{h}', D.smooth_gather(lambda p, w=w: np.cos(w * p.x),
+                                                   ('cos', w)))
+    const_owner = None
+    if 'offset' in names:
+        add('offset', 'f0', np.ones(D.n))
+        const_owner = 'offset'
+    if 'spring' in names:
+        add('spring', 'k', D.gather(lambda p: p.xs))
+        if const_owner is None:
+            add('spring', 'c', np.ones(D.n))
+            const_owner = 'spring'
+    if 'asymmetry' in names:
+        if const_owner is None:
+            add('asymmetry', 'dfc', D.smooth_gather(lambda p: 0.5 * np.abs(_sgn(p.v)),
+                                                    ('abs_sgn',)))
+        add('asymmetry', 'dfv', D.smooth_gather(lambda p: 0.5 * np.abs(p.v), ('abs_v',)))
+    if 'gravity' in names:
+        add('gravity', 'A', D.smooth_gather(lambda p: np.sin(p.x), ('sinq',)))
+        add('gravity', 'B', D.smooth_gather(lambda p: np.cos(p.x), ('cosq',)))
+    X = np.stack(cols, axis=1) if cols else np.zeros((D.n, 0))
+    return X, labels
+
+
+def target(D: Data, spec: Spec) -> np.ndarray:
+    """Return the left-hand side: drive force (delayed), minus ``M·ẍ`` if M is fixed."""
+    tau = spec.eta.get('delay', 0.0) if 'delay' in spec.names else 0.0
+    y = D.y(tau)
+    if not spec.mass_free:
+        y = y - spec.mass * D.al()
+    return y
+
+
+# ------------------------------------------------------------------------------------
+# cross-validated score of a fixed design, and of a candidate with in-fold η
+# ------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class Score:
+    """Held-out result of one design."""
+
+    sse_cv: float
+    sse_fit: float
+    n_params: int
+    fold_theta: tuple
+
+
+def cv_design(D: Data, X: np.ndarray, y: np.ndarray) -> Score:
+    """Held-out SSE of the joint least squares of ``y`` on ``X`` over the folds."""
+    Z = np.column_stack([X, y])
+    P = D.part_grams(Z)
+    total = 0.0
+    ths = []
+    for f in range(D.folds):
+        th, _ = solve_gram(D.train(P, f))
+        total += _sse_with(D.test(P, f), th)
+        ths.append(th)
+    _, sse = solve_gram(P.sum(axis=0))
+    return Score(total, sse, X.shape[1], tuple(ths))
+
+
+def cv_choices(D: Data, designs: Sequence[tuple[np.ndarray, np.ndarray]]) -> float:
+    """Held-out SSE when each fold picks, from its training blocks, the best design.
+
+    ``designs`` are ``(X, y)`` for each trial of a nonlinear parameter (a grid); the
+    choice is made per fold on its training SSE, so the held-out score is honest.
+    """
+    Ps = [D.part_grams(np.column_stack([X, y])) for X, y in designs]
+    total = 0.0
+    for f in range(D.folds):
+        best = None
+        for P in Ps:
+            th, sse = solve_gram(D.train(P, f))
+            if best is None or sse < best[0]:
+                best = (sse, th, P)
+        total += _sse_with(D.test(best[2], f), best[1])
+    return total
+
+
+# ------------------------------------------------------------------------------------
+# nonlinear searches (variable projection)
+# ------------------------------------------------------------------------------------
+def _vp_sse(D: Data, spec: Spec, rows: np.ndarray | None = None) -> float:
+    X, _ = columns(D, spec)
+    y = target(D, spec)
+    if rows is not None:
+        X, y = X[rows], y[rows]
+    Z = np.column_stack([X, y])
+    return solve_gram(Z.T @ Z)[1]
+
+
+def spatial_profile_spectrum(x: np.ndarray, r: np.ndarray) \
+        -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Amplitude spectrum of ``r`` against position (binned means, Hann, padded FFT)."""
+    from motor_comp.workbench.candidates import spatial_spectrum
+    s = spatial_spectrum(x, r)
+    return s.frequency, s.amplitude, s.bin_width, s.span
+
+
+def ripple_basin(D: Data, spec: Spec, rows: np.ndarray) -> tuple[float, int]:
+    """Ripple period and harmonic count from the spectrum of the residual on ``rows``."""
+    X, _ = columns(D, spec)
+    y = target(D, spec)
+    Z = np.column_stack([X[rows], y[rows]])
+    th, _ = solve_gram(Z.T @ Z)
+    r = y - X @ th
+    x = D.gather(lambda p: p.x)
+    freq, amp, width, span = spatial_profile_spectrum(x[rows], r[rows])
+    v = np.abs(D.gather(lambda p: p.v))[rows]
+    dt = D.kins[0].dt
+    min_p = max(8 * width, 4.0 * dt * float(np.percentile(v, 90)))
+    max_p = span / 3.0
+    ok = (freq >= 1.0 / max_p) & (freq <= 1.0 / min_p) if max_p > min_p else freq < 0
+    if not np.any(ok):
+        return max(max_p, 1e-6), 1
+    i = np.flatnonzero(ok)[np.argmax(amp[ok])]
+    p0 = 1.0 / float(freq[i])
+    df = 1.0 / span
+
+    def amp_at(fq: float) -> float:
+        m = np.abs(freq - fq) <= df
+        return float(np.max(amp[m])) if np.any(m) else 0.0
+    a1 = amp_at(1.0 / p0)
+    floor = float(np.median(amp))
+    nh = 1
+    for h in range(2, MAX_HARMONICS + 1):
+        if h / p0 > 1.0 / min_p:
+            break
+        ah = amp_at(h / p0)
+        if ah > 0.15 * a1 and ah > 4 * floor:
+            nh = h
+    return p0, nh
+
+
+def fit_ripple(D: Data, spec: Spec, rows: np.ndarray) -> tuple[float, int]:
+    """Ripple period and harmonic count of ``spec`` + ripple, from ``rows`` only.
+
+    The basin from the spatial spectrum of the current residual, the period by
+    variable projection, then the harmonic count by BIC (``n_eff·ln SSE + 2H·ln n_eff``
+    over the rows' independent samples) with every linear parameter re-solved, and
+    the period refined once more for that count.
+    """
+    base = spec.without('ripple')
+    p0, nh0 = ripple_basin(D, base, rows)
+    period = refine_period(D, base, p0, nh0, rows)
+    x = D.gather(lambda p: p.x)
+    v = np.abs(D.gather(lambda p: p.v))[rows]
+    min_p = 4.0 * D.kins[0].dt * float(np.percentile(v, 90))
+    Xf, _ = columns(D, base)
+    y = target(D, base)
+    Xf, y = Xf[rows], y[rows]
+    n_eff = max(D.n_eff * np.count_nonzero(rows) / D.n, 2.0)
+    best = None
+    for h in range(1, MAX_HARMONICS + 1):
+        if h > 1 and h / period > 1.0 / max(min_p, 1e-12):
+            break
+        w = 2 * math.pi * np.arange(1, h + 1) / period
+        S = D.smooth_gather(lambda p: np.sin(np.outer(p.x, w)))[rows]
+        C = D.smooth_gather(lambda p: np.cos(np.outer(p.x, w)))[rows]
+        Z = np.column_stack([Xf, S, C, y])
+        sse = solve_gram(Z.T @ Z)[1]
+        bic = n_eff * math.log(max(sse, 1e-300)) + 2 * h * math.log(n_eff)
+        if best is None or bic < best[0]:
+            best = (bic, h)
+    nh = best[1]
+    if nh != nh0:
+        period = refine_period(D, base, period, nh, rows)
+    del x
+    return period, nh
+
+
+def refine_period(D: Data, spec: Spec, p0: float, nh: int, rows: np.ndarray) -> float:
+    """Local variable-projection search of the ripple period around ``p0``.
+
+    The trial columns are smoothed like every other column: at the speeds of a fast
+    sweep the ripple's time frequency reaches the smoother's stop band, so an
+    unsmoothed search would weigh those samples differently from the final fit.
+    """
+    x = D.gather(lambda p: p.x)
+    span = float(np.ptp(x[rows])) or 1.0
+    base = spec.without('ripple')
+    Xf, _ = columns(D, base)
+    y = target(D, base)
+    Xf, y = Xf[rows], y[rows]
+
+    def sse(period: float) -> float:
+        w = 2 * math.pi * np.arange(1, nh + 1) / period
+        S = D.smooth_gather(lambda p: np.sin(np.outer(p.x, w)))[rows]
+        C = D.smooth_gather(lambda p: np.cos(np.outer(p.x, w)))[rows]
+        Z = np.column_stack([Xf, S, C, y])
+        return solve_gram(Z.T @ Z)[1]
+    dp = 1.5 * p0 * p0 / span
+    opt = minimize_scalar(sse, bounds=(max(p0 - dp, 0.5 * p0), p0 + dp), method='bounded',
+                          options={'xatol': 1e-6 * p0})
+    return float(opt.x)
+
+
+def stribeck_grid(D: Data, rows: np.ndarray | None = None) -> list[tuple[float, float]]:
+    """Trial ``(vs, δ)``: vs inside the observed speeds, below 10 % of the high ones.
+
+    A larger vs would stretch the hump over the whole speed range, where it copies a
+    (negative) viscous term instead of describing low-speed friction.
+    """
+    v = np.abs(D.gather(lambda p: p.v))
+    v = v if rows is None else v[rows]
+    lo = max(float(np.percentile(v, 1)), 1e-7)
+    hi = max(0.1 * float(np.percentile(v, 95)), 2 * lo)
+    return [(float(vs), d) for d in (0.5, 1.0, 2.0)
+            for vs in np.exp(np.linspace(np.log(lo), np.log(hi), 8))]
+
+
+def delay_grid(D: Data, max_tau: float = 0.03) -> np.ndarray:
+    """Trial delays [s]: 0 … min(30 ms, 10 % of the record) in half samples."""
+    dt = D.kins[0].dt
+    hi = min(max_tau, 0.1 * min(k.duration for k in D.kins))
+    return np.arange(0.0, hi + 1e-12, max(0.5 * dt, hi / 60.0))
+
+
+def backlash_grid(D: Data) -> np.ndarray:
+    """Trial gap widths: from a few encoder counts to 5 % of the travel (log-spaced)."""
+    kin = D.kins[0]
+    steps = np.abs(np.diff(kin.position))
+    quantum = float(np.min(steps[steps > 0], initial=0.0))
+    lo = max(1e-7, 5.0 * quantum, 10.0 * kin.noise_std())
+    hi = min(MAX_BACKLASH, 0.05 * float(np.ptp(kin.x)))
+    hi = min(max(hi, 4 * lo), MAX_BACKLASH)
+    lo = min(lo, 0.25 * hi)
+    return np.logspace(np.log10(lo), np.log10(hi), 8)
+
+
+def gms_grid(D: Data) -> list[tuple[float, float]]:
+    """Return trial ``(d0, c)``: GMS distance scale and slip rate.
+
+    The scale from 3 encoder counts (a pre-sliding displacement below the encoder's
+    resolution is not observable: a GMS that stiff only mimics a stick or a gap) to
+    1 % of the travel, c 300 … 3000 1/s.
+    """
+    lo = gms_min_scale(D)
+    hi = max(0.01 * float(np.ptp(D.kins[0].x)), 100 * lo)
+    return [(float(d), float(c)) for d in np.logspace(np.log10(lo), np.log10(hi), 6)
+            for c in (300.0, 3000.0)]
+
+
+def gms_min_scale(D: Data) -> float:
+    """Return the smallest GMS distance scale searched [m]: 3 encoder counts (or noise)."""
+    kin = D.kins[0]
+    steps = np.abs(np.diff(kin.position))
+    quantum = float(np.min(steps[steps > 0], initial=1e-9))
+    return max(3.0 * quantum, 3.0 * kin.noise_std(), 1e-9)
+
+
+def gms_eta(d0: float, c: float, ratio: float) -> tuple:
+    """Return the presliding spec entry: element distances, slip rate, Stribeck ratio."""
+    return (tuple(d0 * f for f in GMS_DISTANCES), float(c), float(ratio))
+
+
+def _eta_trials(D: Data, spec: Spec, name: str, model: AxisModel) -> list:
+    """Grid of the nonlinear parameters of ``name`` (for the in-fold choice)."""
+    if name == 'stribeck':
+        return stribeck_grid(D)
+    if name == 'delay':
+        return list(delay_grid(D))
+    if name == 'backlash':
+        return list(backlash_grid(D))
+    if name == 'presliding':
+        ratio = _stribeck_ratio(D, spec.without(name))
+        return [gms_eta(d, c, ratio) for d, c in gms_grid(D)]
+    raise KeyError(name)
+
+
+def _stribeck_ratio(D: Data, spec: Spec) -> float:
+    if 'stribeck' not in spec.names:
+        return 0.0
+    X, lab = columns(D, spec)
+    y = target(D, spec)
+    th, _ = solve_gram(np.column_stack([X, y]).T @ np.column_stack([X, y]))
+    d = dict(zip(lab, th))
+    fc = max(float(d.get(('coulomb', 'fc'), 1.0)), 1e-6)
+    return max(float(d.get(('stribeck', 'dfs'), 0.0)), 0.0) / fc
+
+
+def sync(D: Data, spec: Spec, model: AxisModel) -> None:
+    """Put the data in the state ``spec`` assumes (delay for the NRMSE, backlash gap)."""
+    w = float(spec.eta.get('backlash', 0.0)) if 'backlash' in spec.names else 0.0
+    if w != D.width0:
+        D.set_backlash(w, model)
+    D.tau0 = float(spec.eta.get('delay', 0.0)) if 'delay' in spec.names else 0.0
+
+
+def _design_for(D: Data, spec: Spec, model: AxisModel) -> tuple[np.ndarray, np.ndarray]:
+    if 'backlash' in spec.names and abs(D.width0 - spec.eta['backlash']) > 0:
+        D.set_backlash(spec.eta['backlash'], model)
+    X, _ = columns(D, spec)
+    return X, target(D, spec)
+
+
+def best_eta(D: Data, spec: Spec, name: str, model: AxisModel,
+             rows: np.ndarray | None = None) -> Any:
+    """Nonlinear parameters of ``name`` in ``spec`` fitted on ``rows`` (all by default)."""
+    rows = np.ones(D.n, dtype=bool) if rows is None else rows
+    sync(D, spec.without(name), model)
+    if name == 'ripple':
+        return fit_ripple(D, spec, rows)
+    trials = _eta_trials(D, spec, name, model)
+    costs = []
+    for eta in trials:
+        s = spec.with_(name, eta)
+        if name == 'backlash':
+            D.set_backlash(eta, model)
+        costs.append(_vp_sse(D, s, rows))
+    i = int(np.argmin(costs))
+    eta = trials[i]
+    if name == 'stribeck':
+        vs_hi = max(t[0] for t in trials)
+
+        def cost(q: np.ndarray) -> float:
+            vs = float(np.exp(np.clip(q[0], -16, np.log(vs_hi))))
+            dl = float(np.clip(q[1], 0.3, 5.0))
+            return _vp_sse(D, spec.with_(name, (vs, dl)), rows)
+        opt = minimize(cost, np.array([np.log(eta[0]), eta[1]]), method='Nelder-Mead',
+                       options={'xatol': 1e-3, 'fatol': 1e-9 * costs[i], 'maxiter': 50})
+        eta = (float(np.exp(np.clip(opt.x[0], -16, np.log(vs_hi)))),
+               float(np.clip(opt.x[1], 0.3, 5.0)))
+    elif name == 'delay':
+        lo, hi = trials[max(i - 1, 0)], trials[min(i + 1, len(trials) - 1)]
+        if hi > lo:
+            opt = minimize_scalar(lambda t: _vp_sse(D, spec.with_(name, float(t)), rows),
+                                  bounds=(lo, hi), method='bounded',
+                                  options={'xatol': 1e-3 * D.kins[0].dt})
+            eta = float(opt.x)
+    elif name == 'backlash':
+        lo, hi = trials[max(i - 1, 0)], trials[min(i + 1, len(trials) - 1)]
+
+        def bcost(lw: float) -> float:
+            D.set_backlash(float(np.exp(lw)), model)
+            return _vp_sse(D, spec.with_(name, float(np.exp(lw))), rows)
+        opt = minimize_scalar(bcost, bounds=(np.log(lo), np.log(hi)), method='bounded',
+                              options={'xatol': 0.01})
+        eta = float(np.exp(opt.x))
+        D.set_backlash(eta, model)
+    elif name == 'presliding':
+        dists, c0, ratio = eta
+        d0 = dists[1] / GMS_DISTANCES[1]
+
+        lo_d = np.log(gms_min_scale(D))
+
+        def gcost(q: np.ndarray) -> float:
+            d = float(np.exp(np.clip(q[0], lo_d, np.log(1.0))))
+            c = float(np.exp(np.clip(q[1], 0.0, np.log(1e6))))
+            return _vp_sse(D, spec.with_(name, gms_eta(d, c, ratio)), rows)
+        opt = minimize(gcost, np.log([d0, c0]), method='Nelder-Mead',
+                       options={'xatol': 2e-2, 'fatol': 1e-6 * costs[i], 'maxiter': 30})
+        eta = gms_eta(float(np.exp(np.clip(opt.x[0], lo_d, 0.0))),
+                      float(np.exp(np.clip(opt.x[1], 0.0, np.log(1e6)))), ratio)
+        eta = _prune_gms(D, spec, eta, rows)
+    return eta
+
+
+def _prune_gms(D: Data, spec: Spec, eta: tuple, rows: np.ndarray) -> tuple:
+    """Drop GMS elements whose fitted level is not positive (active set, repeated).
+
+    An element with a negative slip limit is no physical friction: left in, pairs of
+    elements of opposite sign can mimic other reversal transients (a backlash gap).
+    """
+    dists, c, ratio = eta
+    while len(dists) > 1:
+        s1 = spec.with_('presliding', (dists, c, ratio))
+        X, labels = columns(D, s1)
+        y = target(D, s1)
+        Z = np.column_stack([X[rows], y[rows]])
+        th, _ = solve_gram(Z.T @ Z)
+        beta = [t for (g, n), t in zip(labels, th) if g == 'presliding']
+        worst = int(np.argmin(beta))
+        if beta[worst] > 0:
+            break
+        dists = tuple(d for j, d in enumerate(dists) if j != worst)
+    return (tuple(dists), c, ratio)
+
+
+def cv_candidate(D: Data, spec: Spec, name: str, model: AxisModel, *,
+                 screen: float = 0.0) -> tuple[float, Any]:
+    """Held-out SSE of ``spec`` + ``name`` with its nonlinear parameters chosen in-fold.
+
+    Returns the SSE and the all-data choice of the nonlinear parameters (None for a
+    linear effect).  With ``screen`` > 0, a nonlinear candidate whose all-data
+    (in-sample) gain is below ``screen`` is scored with its nonlinear parameters held
+    at the all-data choice instead (it cannot pay on held-out data anyway, and the
+    in-fold searches are the expensive part).
+    """
+    sync(D, spec, model)
+    if name in LINEAR:
+        s = spec.with_(name)
+        X, _ = columns(D, s)
+        return cv_design(D, X, target(D, s)).sse_cv, None
+    if name == 'ripple':
+        eta_all = best_eta(D, spec.with_('ripple', (1.0, 1)), 'ripple', model)
+    else:
+        trials = _eta_trials(D, spec, name, model)
+        eta_all = best_eta(D, spec.with_(name, trials[0]), name, model)
+    if screen > 0:
+        s1 = spec.with_(name, eta_all)
+        X1, _ = _design_for(D, s1, model)
+        sse1 = _vp_sse(D, s1)
+        sync(D, spec, model)
+        sse0 = _vp_sse(D, spec)
+        if sse0 <= 0 or 1.0 - sse1 / sse0 < screen:
+            X, y = _design_for(D, s1, model)
+            out = cv_design(D, X, y).sse_cv
+            sync(D, spec, model)
+            return out, eta_all
+    if name == 'ripple':
+        total = 0.0
+        for f in range(D.folds):
+            rows = D.train_rows(f)
+            period, nh = fit_ripple(D, spec, rows)
+            s = spec.with_('ripple', (period, nh))
+            X, _ = columns(D, s)
+            y = target(D, s)
+            P = D.part_grams(np.column_stack([X, y]))
+            th, _ = solve_gram(D.train(P, f))
+            total += _sse_with(D.test(P, f), th)
+        return total, eta_all
+    # refine the grid near the all-data optimum so the in-fold choice is not grid-bound
+    if name == 'delay':
+        dt = D.kins[0].dt
+        near = np.clip(eta_all + dt * np.linspace(-2, 2, 17), 0.0, None)
+        trials = sorted(set(trials) | set(near))
+    elif name == 'stribeck':
+        vs, dl = eta_all
+        trials = trials + [(vs * f, d) for f in (0.7, 1.0, 1.4) for d in (dl * 0.8, dl,
+                                                                          dl * 1.25)]
+    elif name == 'backlash':
+        trials = list(trials) + [eta_all * f for f in (0.8, 0.9, 1.0, 1.1, 1.25)]
+    elif name == 'presliding':
+        dists, c, ratio = eta_all
+        trials = [(tuple(d * f for d in dists), c * g, ratio) for f, g in
+                  ((1.0, 1.0), (0.6, 1.0), (1.6, 1.0), (1.0, 0.5), (1.0, 2.0))]
+    designs = []
+    for eta in trials:
+        s = spec.with_(name, eta)
+        designs.append(_design_for(D, s, model))
+    sse = cv_choices(D, designs)
+    sync(D, spec, model)
+    return sse, eta_all
+
+
+# ------------------------------------------------------------------------------------
+# the fit of a spec: parameters, covariance, decoded effects
+# ------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class Estimate:
+    """A spec fitted on all rows, with its held-out score and uncertainties.
+
+    Parameters
+    ----------
+    spec : Spec
+        Effects and nonlinear parameters.
+    model : AxisModel
+        The fitted model (model-file form).
+    scalars : dict[str, dict[str, float]]
+        Flat physical parameters per effect (and ``mass``).
+    se : dict[str, dict[str, float]]
+        Their standard errors (cluster-robust sandwich + delta method).
+    at_bound : dict[str, list[str]]
+        Parameters held at a physical bound (``fc ≥ 0`` …).
+    correlations : list of (str, str, float)
+        Strongly correlated parameter pairs ``(group.name, group.name, ρ)``.
+    sse_cv, sse_fit : float
+        Held-out and in-sample sums of squared residuals [N²].
+    n_params : int
+        Fitted parameters (linear and nonlinear).
+    nrmse_cv : float
+        Held-out force NRMSE.
+    """
+
+    spec: Spec
+    model: AxisModel
+    scalars: dict
+    se: dict
+    at_bound: dict
+    correlations: list
+    sse_cv: float
+    sse_fit: float
+    n_params: int
+    nrmse_cv: float
+
+
+def n_params(spec: Spec) -> int:
+    """Fitted parameters of ``spec`` (linear columns + free nonlinear ones)."""
+    k = int(spec.mass_free)
+    per = {'coulomb': 1, 'viscous': 1, 'stribeck': 3, 'presliding': 2, 'offset': 1,
+           'spring': 2, 'asymmetry': 2, 'delay': 1, 'backlash': 1, 'gravity': 2}
+    for n in spec.names:
+        if n == 'ripple':
+            k += 1 + 2 * int(spec.eta['ripple'][1])
+        elif n == 'presliding':
+            k += 2 + len(spec.eta['presliding'][0]) - 1   # d0, c, element levels − fc
+        else:
+            k += per[n]
+    return k
+
+
+def _nl_params(spec: Spec) -> list[tuple[str, str, float, Callable[[Spec, float], Spec]]]:
+    """Free nonlinear parameters as (group, name, value, setter) for the Jacobian."""
+    out = []
+    if 'ripple' in spec.names:
+        p, nh = spec.eta['ripple']
+        out.append(('ripple', 'period', p, lambda s, v: s.with_('ripple', (v, nh))))
+    if 'stribeck' in spec.names and 'presliding' not in spec.names:
+        vs, dl = spec.eta['stribeck']
+        out.append(('stribeck', 'vs', vs, lambda s, v: s.with_('stribeck', (v, dl))))
+        out.append(('stribeck', 'delta', dl, lambda s, v: s.with_('stribeck', (vs, v))))
+    if 'delay' in spec.names:
+        out.append(('delay', 'tau', spec.eta['delay'],
+                    lambda s, v: s.with_('delay', v)))
+    if 'presliding' in spec.names:
+        dists, c, r = spec.eta['presliding']
+        out.append(('presliding', 'd0', 1.0,
+                    lambda s, v: s.with_('presliding', (tuple(d * v for d in dists), c, r))))
+        out.append(('presliding', 'c', c,
+                    lambda s, v: s.with_('presliding', (dists, v, r))))
+    return out
+
+
+def estimate(D: Data, spec: Spec, model: AxisModel, *, cv: bool = True) -> Estimate:
+    """Fit ``spec`` on all rows: θ, sandwich covariance, decoded model (see module doc)."""
+    sync(D, spec, model)
+    X, labels = columns(D, spec)
+    y = target(D, spec)
+    Z = np.column_stack([X, y])
+    th, sse = solve_gram(Z.T @ Z)
+    sc = cv_design(D, X, y) if cv else None
+    e = y - X @ th
+    # Gauss–Newton columns of the nonlinear parameters (derivative of the fit)
+    J = [X]
+    jl = list(labels)
+    for g, name, val, setter in _nl_params(spec):
+        h = 1e-3 * abs(val) if val else 1e-6
+        s1 = setter(spec, val + h)
+        X1, _ = columns(D, s1)
+        y1 = target(D, s1)
+        # d(residual)/dη = d(y − Xθ)/dη; the Jacobian column is its negative
+        J.append(((e - (y1 - X1 @ th)) / h)[:, None])
+        jl.append((g, name))
+    Jm = np.column_stack(J)
+    cov = _sandwich(D, Jm, e)
+    phi = np.concatenate([th, [v for _, _, v, _ in _nl_params(spec)]])
+    vals = {lab: float(v) for lab, v in zip(jl, phi)}
+    idx = {lab: i for i, lab in enumerate(jl)}
+    fitted, scalars, se, at_bound = decode(spec, model, vals, idx, cov)
+    corr = _correlations(cov, jl)
+    sse_cv = sc.sse_cv if sc is not None else float('nan')
+    den = D.f_in_scale()
+    nr = math.sqrt(sse_cv / den) if den > 0 and np.isfinite(sse_cv) else float('nan')
+    return Estimate(spec=spec, model=fitted, scalars=scalars, se=se, at_bound=at_bound,
+                    correlations=corr, sse_cv=sse_cv, sse_fit=sse, n_params=n_params(spec),
+                    nrmse_cv=nr)
+
+
+def _sandwich(D: Data, J: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Cluster-robust covariance with the blocks as clusters (small-sample corrected)."""
+    G = J.T @ J
+    d = np.sqrt(np.maximum(np.diag(G), 1e-300))
+    Gs = G / np.outer(d, d)
+    try:
+        Ginv = np.linalg.pinv(Gs, rcond=1e-12) / np.outer(d, d)
+    except np.linalg.LinAlgError:
+        return np.full(G.shape, np.nan)
+    # clusters: consecutive validation blocks merged into about 24 (longer than any
+    # plausible correlation time of the residual, still enough for the meat matrix)
+    merge = max(1, D.n_blocks // 24)
+    cl = D.block // merge
+    nb = int(cl.max()) + 1
+    S = np.zeros((nb, J.shape[1]))
+    np.add.at(S, cl, J * e[:, None])
+    meat = S.T @ S
+    corr = nb / max(nb - 1, 1) * (len(e) - 1) / max(len(e) - J.shape[1], 1)
+    return corr * Ginv @ meat @ Ginv
+
+
+def _correlations(cov: np.ndarray, labels: list) -> list[tuple[str, str, float]]:
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    out = []
+    for i in range(len(labels)):
+        for j in range(i + 1, len(labels)):
+            if labels[i][0] == labels[j][0] or sd[i] == 0 or sd[j] == 0:
+                continue
+            rho = float(cov[i, j] / (sd[i] * sd[j]))
+            if abs(rho) >= 0.97:
+                out.append((f'{labels[i][0]}.{labels[i][1]}',
+                            f'{labels[j][0]}.{labels[j][1]}', rho))
+    return out
+
+
+def _delta_se(fn: Callable[[dict], float], vals: dict, idx: dict, cov: np.ndarray) -> float:
+    """Return the standard error of ``fn(vals)`` by the delta method."""
+    base = fn(vals)
+    g = np.zeros(cov.shape[0])
+    for lab, i in idx.items():
+        h = 1e-6 * max(abs(vals[lab]), 1e-12)
+        v2 = dict(vals)
+        v2[lab] = vals[lab] + h
+        g[i] = (fn(v2) - base) / h
+    var = float(g @ cov @ g)
+    return math.sqrt(var) if var > 0 and np.isfinite(var) else float('nan')
+
+
+def decode(spec: Spec, model: AxisModel, vals: dict, idx: dict, cov: np.ndarray) \
+        -> tuple[AxisModel, dict, dict, dict]:
+    """Physical effects from the estimated columns (model-file form) and their SEs."""
+    names = set(spec.names)
+    scalars: dict[str, dict[str, float]] = {}
+    fns: dict[str, dict[str, Callable[[dict], float]]] = {}
+    at_bound: dict[str, list[str]] = {}
+
+    def g(v: dict, group: str, name: str, default: float = 0.0) -> float:
+        return float(v.get((group, name), default))
+
+    fns[MASS] = {'mass': (lambda v: g(v, MASS, 'mass', spec.mass))}
+    gms = 'presliding' in names and 'coulomb' in names
+    if gms:
+        dists = spec.eta['presliding'][0]
+        nd = len(dists)
+
+        def fc_of(v: dict) -> float:
+            return sum(g(v, 'presliding', f'b{j}') for j in range(nd))
+        fns['coulomb'] = {'fc': fc_of}
+    elif 'coulomb' in names:
+        fns['coulomb'] = {'fc': lambda v: g(v, 'coulomb', 'fc')}
+    if 'viscous' in names:
+        fns['viscous'] = {'fv': lambda v: g(v, 'viscous', 'fv')}
+    if 'stribeck' in names:
+        if gms:
+            r = spec.eta['presliding'][2]
+            fns['stribeck'] = {'fs': lambda v: fc_of(v) * (1 + r)}
+        else:
+            fns['stribeck'] = {'fs': lambda v: g(v, 'coulomb', 'fc') + g(v, 'stribeck', 'dfs'),
+                               'vs': lambda v: g(v, 'stribeck', 'vs'),
+                               'delta': lambda v: g(v, 'stribeck', 'delta')}
+    if gms:
+        fns['presliding'] = {
+            'stiffness': lambda v: sum(max(g(v, 'presliding', f'b{j}'), 0.0) / (
+                dists[j] * g(v, 'presliding', 'd0', 1.0)) for j in range(nd)),
+            'c': lambda v: g(v, 'presliding', 'c'),
+            'elements': lambda v: float(sum(g(v, 'presliding', f'b{j}') > 0
+                                            for j in range(nd)))}
+    if 'ripple' in names:
+        nh = int(spec.eta['ripple'][1])
+        d = {'period': lambda v: g(v, 'ripple', 'period')}
+        for h in range(1, nh + 1):
+            d[f'amplitude_{h}'] = (lambda v, h=h: math.hypot(g(v, 'ripple', f'a{h}'),
+                                                             g(v, 'ripple', f'b{h}')))
+        fns['ripple'] = d
+    if 'offset' in names:
+        fns['offset'] = {'f0': lambda v: g(v, 'offset', 'f0')}
+    if 'spring' in names:
+        if ('spring', 'c') in vals:
+            fns['spring'] = {'k': lambda v: g(v, 'spring', 'k'),
+                             'x0': lambda v: (-g(v, 'spring', 'c') / g(v, 'spring', 'k')
+                                              if g(v, 'spring', 'k') else 0.0)}
+        else:
+            fns['spring'] = {'k': lambda v: g(v, 'spring', 'k')}
+    if 'asymmetry' in names:
+        fns['asymmetry'] = {'dfc': lambda v: g(v, 'asymmetry', 'dfc'),
+                            'dfv': lambda v: g(v, 'asymmetry', 'dfv')}
+    if 'gravity' in names:
+        fns['gravity'] = {'mgl': lambda v: math.hypot(g(v, 'gravity', 'A'),
+                                                      g(v, 'gravity', 'B')),
+                          'q0': lambda v: math.atan2(-g(v, 'gravity', 'B'),
+                                                     g(v, 'gravity', 'A'))}
+    if 'delay' in names:
+        fns['delay'] = {'tau': lambda v: g(v, 'delay', 'tau', spec.eta['delay'])}
+    se: dict[str, dict[str, float]] = {}
+    for grp, d in fns.items():
+        scalars[grp] = {}
+        se[grp] = {}
+        for k, fn in d.items():
+            scalars[grp][k] = float(fn(vals))
+            se[grp][k] = _delta_se(fn, vals, idx, cov) if idx else float('nan')
+    if 'backlash' in names:
+        scalars['backlash'] = {'width': float(spec.eta['backlash'])}
+        se['backlash'] = {'width': float('nan')}
+    # -- to effects (physical bounds applied and reported) ---------------------------
+    mass = scalars[MASS]['mass']
+    if spec.mass_free and not mass > 0:
+        at_bound.setdefault(MASS, []).append('mass')
+        mass = model.mass
+    out = model.without(*model.names).replace(mass=float(mass))
+    effects = []
+    fc = 0.0
+    if 'coulomb' in names:
+        fc = scalars['coulomb']['fc']
+        if fc < 0:
+            at_bound.setdefault('coulomb', []).append('fc')
+            fc = 0.0
+        effects.append(make_effect('coulomb', {'fc': fc}))
+    if 'viscous' in names:
+        fv = scalars['viscous']['fv']
+        if fv < 0:
+            at_bound.setdefault('viscous', []).append('fv')
+            fv = 0.0
+        effects.append(make_effect('viscous', {'fv': fv}))
+    if 'stribeck' in names:
+        s = scalars['stribeck']
+        fs = max(s['fs'], fc)
+        if s['fs'] < fc:
+            at_bound.setdefault('stribeck', []).append('fs')
+        vs, dl = spec.eta['stribeck'] if 'stribeck' in spec.eta else (1e-3, 1.0)
+        effects.append(make_effect('stribeck', {'fs': fs, 'vs': vs, 'delta': dl}))
+    if gms:
+        dists, c, _ = spec.eta['presliding']
+        beta = [max(g(vals, 'presliding', f'b{j}'), 0.0) for j in range(len(dists))]
+        keep = [j for j in range(len(dists)) if beta[j] > 1e-9 * max(sum(beta), 1e-300)]
+        if not keep:
+            keep = [int(np.argmax(beta))]
+            beta[keep[0]] = max(fc, 1e-9)
+        tot = sum(beta[j] for j in keep)
+        effects.append(make_effect('presliding', {
+            'alpha': [beta[j] / tot for j in keep],
+            'k': [max(beta[j], 1e-12) / dists[j] for j in keep],
+            'C': c * max(fc, 1e-9)}))
+    if 'ripple' in names:
+        period, nh = spec.eta['ripple']
+        harm = [[g(vals, 'ripple', f'a{h}'), g(vals, 'ripple', f'b{h}')]
+                for h in range(1, int(nh) + 1)]
+        effects.append(make_effect('ripple', {'period': period, 'harmonics': harm}))
+    if 'offset' in names:
+        f0 = scalars['offset']['f0']
+        effects.append(make_effect('offset', {'f0': f0}))
+    if 'spring' in names:
+        k = scalars['spring']['k']
+        x0 = scalars['spring'].get('x0', 0.0)
+        x0 = float(np.clip(x0, -1e3, 1e3)) if np.isfinite(x0) else 0.0
+        effects.append(make_effect('spring', {'k': k, 'x0': x0}))
+    if 'asymmetry' in names:
+        a = scalars['asymmetry']
+        effects.append(make_effect('asymmetry', {'dfc': a['dfc'], 'dfv': a['dfv']}))
+    if 'delay' in names:
+        effects.append(make_effect('delay', {'tau': max(scalars['delay']['tau'], 0.0)}))
+    if 'backlash' in names:
+        effects.append(make_effect('backlash', {'width': scalars['backlash']['width']}))
+    if 'gravity' in names:
+        gr = scalars['gravity']
+        effects.append(make_effect('gravity', {'mgl': gr['mgl'], 'q0': gr['q0']}))
+    for e in effects:
+        out = out.with_effect(e)
+    if not spec.mass_free:
+        scalars[MASS] = {'mass': float(spec.mass)}
+        se[MASS] = {'mass': float('nan')}
+    return out, scalars, se, at_bound
+
+
+def spec_of(model: AxisModel) -> Spec:
+    """Return the spec of an existing model (its nonlinear parameters as given)."""
+    eta: dict[str, Any] = {}
+    names = []
+    for e in model.effects:
+        n = e.name
+        names.append(n)
+        if n == 'ripple':
+            eta[n] = (e.period, len(e.harmonics))
+        elif n == 'stribeck':
+            eta[n] = (e.vs, e.delta)
+        elif n == 'delay':
+            eta[n] = e.tau
+        elif n == 'backlash':
+            eta[n] = e.width
+        elif n == 'presliding':
+            fc = max(model.fc, 1e-6)
+            ratio = (model.stribeck_curve_params()[1] - fc) / fc
+            dists = tuple(a * fc / k for a, k in zip(e.alpha, e.k))
+            eta[n] = (dists, e.C / fc, ratio)
+    return Spec(tuple(n for n in ORDER if n in names), eta, True, model.mass)
+
+
+def theta_of(model: AxisModel, labels: Sequence[tuple[str, str]]) -> np.ndarray:
+    """Return the coefficients a model gives the columns ``labels`` of its own spec."""
+    out = []
+    for g, n in labels:
+        e = model.get(g) if g != MASS else None
+        if g == MASS:
+            v = model.mass
+        elif g == 'coulomb':
+            v = model.fc
+        elif g == 'presliding':
+            v = model.get('presliding').alpha[int(n[1:])] * model.fc
+        elif g == 'viscous':
+            v = model.fv
+        elif g == 'stribeck':
+            v = e.fs - model.fc
+        elif g == 'ripple':
+            h = int(n[1:]) - 1
+            v = e.harmonics[h][0 if n[0] == 'a' else 1] if h < len(e.harmonics) else 0.0
+        elif g == 'offset':
+            v = e.f0
+        elif g == 'spring':
+            v = e.k if n == 'k' else -e.k * e.x0
+        elif g == 'asymmetry':
+            v = e.dfc if n == 'dfc' else e.dfv
+        elif g == 'gravity':
+            v = e.mgl * math.cos(e.q0) if n == 'A' else -e.mgl * math.sin(e.q0)
+        else:
+            v = 0.0
+        out.append(float(v))
+    # a constant shared by offset and spring: the spring's part goes to the offset
+    if model.has('offset') and model.has('spring'):
+        sp = model.get('spring')
+        for i, (g, n) in enumerate(labels):
+            if (g, n) == ('offset', 'f0'):
+                out[i] -= sp.k * sp.x0
+    return np.array(out)
+
+
+def given_sse(D: Data, model: AxisModel) -> float:
+    """Sum of squared force residuals of ``model`` as given, on the rows (no fitting)."""
+    spec = spec_of(model)
+    sync(D, spec, model)
+    X, labels = columns(D, spec)
+    r = target(D, spec) - X @ theta_of(model, labels)
+    return float(r @ r)

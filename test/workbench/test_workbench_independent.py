@@ -1,0 +1,372 @@
+"""The workbench on data the project did not generate (issue 11 item 7 and "Must show").
+
+Data: :mod:`independent_generator` — its own integrator (velocity-level time stepping),
+controller (P/PI cascade with feedforward), effect laws, GMS element shapes, speed
+sweeps in time order and chirps, 100 Hz – 2 kHz, linear and rotary axes, voltage /
+current / force inputs.  Each case starts from a bare model (``effects: {}``) with the
+mass off by 2× or 0.6× (or, for wrong-parameter cases, from the true effects with one
+parameter off by 30–40 %), runs ``fit --auto`` through its public entry point and is
+judged on:
+
+* the final effect set is exactly the planted one (no missing, no false effect);
+* mass / inertia within 3 %, every main parameter within the tolerances of the
+  project's hidden-effect test (delay to 0.1 ms);
+* the held-out force NRMSE within 1.1× the NRMSE of the true model on the same data.
+
+The issue's bar: at least 95 % of cases pass.  The test runs every case of
+:data:`independent_generator.CASES` once (each case draws its own rig and parameters
+from the seed and its label) on 20 s runs, on two processes when there are two cores;
+``bench/workbench_independent.py`` runs several seeds per case and prints the table.
+"""
+from __future__ import annotations
+
+import ast
+import dataclasses
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from independent_generator import CASES, Case, draw_case, generate, \
+    parameter_errors  # noqa: E402
+
+#: many generate-and-fit jobs: allow more than pytest's default 300 s when the machine
+#: is shared (the module's own fixture does all the work)
+pytestmark = pytest.mark.timeout(1200)
+
+#: the issue's bars
+EXACT_SHARE = 0.95
+NRMSE_RATIO = 1.1
+#: run length [s] of the test (the bench uses longer runs and more seeds)
+DURATION = 20.0
+SEEDS = (1,)
+
+
+@dataclasses.dataclass(frozen=True)
+class Outcome:
+    """How ``fit --auto`` did on one generated case."""
+
+    label: str
+    seed: int
+    truth: dict
+    fitted: dict
+    steps: tuple
+    true_nrmse: float
+    fit_nrmse: float
+    params: tuple
+    seconds: float
+    #: wrong-parameter cases: the keys made wrong in the start model, ``diagnose``'s
+    #: first finding and the parameters it names as wrong ``((effect, param, fitted), …)``
+    wrong: tuple = ()
+    finding: str | None = None
+    changes: tuple = ()
+
+    @property
+    def expected(self) -> set:
+        """The planted effect set."""
+        return set(self.truth['effects'])
+
+    @property
+    def found(self) -> set:
+        """The final model's effect set."""
+        return set(self.fitted.get('effects') or {})
+
+    @property
+    def exact(self) -> bool:
+        """Exactly the planted effects."""
+        return self.found == self.expected
+
+    @property
+    def nrmse_ratio(self) -> float:
+        """Held-out NRMSE of the fit over the true model's NRMSE."""
+        return self.fit_nrmse / self.true_nrmse
+
+    @property
+    def params_ok(self) -> bool:
+        """Mass and every main parameter within tolerance."""
+        return all(p[-1] for p in self.params)
+
+    @property
+    def passed(self) -> bool:
+        """The whole must-show for this case."""
+        return self.exact and self.params_ok and self.nrmse_ratio <= NRMSE_RATIO
+
+    def why(self) -> str:
+        """One line: what went wrong (empty when it passed)."""
+        out = []
+        if self.found - self.expected:
+            out.append('false ' + ','.join(sorted(self.found - self.expected)))
+        if self.expected - self.found:
+            out.append('missing ' + ','.join(sorted(self.expected - self.found)))
+        for eff, key, t, f, err, ok in self.params:
+            if not ok:
+                out.append(f'{eff + "." if eff else ""}{key} {f:.4g} vs {t:.4g}')
+        if self.nrmse_ratio > NRMSE_RATIO:
+            out.append(f'NRMSE {self.fit_nrmse:.4f} vs true {self.true_nrmse:.4f}')
+        return '; '.join(out)
+
+
+def as_model(data: dict, source: str = 'model') -> Any:
+    """The project's :class:`AxisModel` of a model-file mapping (one-line errors)."""
+    from motor_comp.physics.axis import AxisModel
+    return AxisModel.from_dict(data, source=source)
+
+
+def evaluate(case: Case, seed: int, *, duration: float = DURATION) -> Outcome:
+    """Generate ``case`` with ``seed``, run ``fit --auto`` from its start model, judge it."""
+    import time
+
+    from motor_comp.workbench import diagnose, fit, kinematics
+    from motor_comp.workbench.session import default_hold
+    rig, truth = case.draw(seed)
+    gen = generate(truth, rig, excitation=case.excitation, duration=duration, seed=seed,
+                   name=case.label)
+    start = as_model(case.start(truth), source='start')
+    true = as_model(truth, source='truth')
+    kin = kinematics(gen.run, hold=default_hold(start))
+    t0 = time.perf_counter()
+    result = fit(kin, start, auto=True)
+    seconds = time.perf_counter() - t0
+    # the true model's NRMSE on the same samples: the starting-model score of a fit
+    # that starts from the truth (nothing fitted into that first number)
+    true_nrmse = float(fit(kin, true).steps[0].force_nrmse)
+    fitted = result.model.to_dict()
+    finding, changes = None, ()
+    if case.changes:
+        best = diagnose(kin, start).best
+        if best is not None:
+            finding = best.effect
+            changes = tuple((c.effect, c.name, c.fitted) for c in best.changes)
+    return Outcome(label=case.label, seed=seed, truth=truth, fitted=fitted,
+                   steps=tuple(s.as_dict() for s in result.steps), true_nrmse=true_nrmse,
+                   fit_nrmse=float(result.steps[-1].force_nrmse),
+                   params=tuple(parameter_errors(truth, fitted)), seconds=seconds,
+                   wrong=tuple(k for k, _ in case.changes), finding=finding,
+                   changes=changes)
+
+
+def _worker_init(path: str) -> None:
+    if path not in sys.path:
+        sys.path.insert(0, path)
+
+
+def parallel_map(fn: Callable, items: Sequence, *, jobs: int | None = None) -> list:
+    """``[fn(i) for i in items]`` on up to ``jobs`` processes (default: the CPU count, ≤ 2).
+
+    The suites are many independent generate-and-fit jobs; two cores halve their wall
+    time.  ``fn`` must be a module-level function of this directory's modules.
+    """
+    import multiprocessing as mp
+    import os
+    jobs = jobs or min(2, os.cpu_count() or 1)
+    if jobs <= 1 or len(items) < 2:
+        return [fn(i) for i in items]
+    ctx = mp.get_context('spawn')      # no fork of a process holding numba/BLAS threads
+    with ctx.Pool(jobs, initializer=_worker_init,
+                  initargs=(str(Path(__file__).resolve().parent),)) as pool:
+        return pool.map(fn, items, chunksize=1)
+
+
+def _evaluate_job(job: tuple) -> Outcome:
+    case, seed, duration = job
+    return evaluate(case, seed, duration=duration)
+
+
+def summary(outcomes: Sequence[Outcome]) -> dict[str, Any]:
+    """Shares and distributions over a set of outcomes (test assertions and bench)."""
+    n = len(outcomes)
+    mass = np.array([abs(o.fitted['mass'] / o.truth['mass'] - 1) for o in outcomes])
+    return {'cases': n,
+            'passed': sum(o.passed for o in outcomes) / n,
+            'exact': sum(o.exact for o in outcomes) / n,
+            'params_ok': sum(o.params_ok for o in outcomes) / n,
+            'nrmse_ok': sum(o.nrmse_ratio <= NRMSE_RATIO for o in outcomes) / n,
+            'mass_within_3pct': float(np.mean(mass <= 0.03)),
+            'mass_err_p50': float(np.median(mass)), 'mass_err_p90': float(np.quantile(mass, 0.9)),
+            'mass_err_max': float(mass.max())}
+
+
+# ---------------------------------------------------------------------- the generator
+
+def test_generator_is_independent_of_the_project_simulator():
+    """The generator imports neither motor_comp.physics nor motor_comp.control."""
+    src = Path(__file__).with_name('independent_generator.py').read_text(encoding='utf-8')
+    banned = ('motor_comp.physics', 'motor_comp.control', 'motor_comp.workbench')
+    for node in ast.walk(ast.parse(src)):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            names = [node.module or '']
+        else:
+            continue
+        for name in names:
+            assert not name.startswith(banned), name
+    # its GMS element shapes are its own, not the project's four-element one
+    from independent_generator import GMS_SHAPES
+    assert all(tuple(a) != (0.45, 0.30, 0.15, 0.10) for a, _ in GMS_SHAPES)
+    # and at run time: importing it in a fresh interpreter loads none of them
+    import subprocess
+    code = ('import sys; sys.path.insert(0, %r); import independent_generator; '
+            'print([m for m in sys.modules if m.startswith(("motor_comp.physics", '
+            '"motor_comp.control", "motor_comp.workbench"))])'
+            % str(Path(__file__).parent))
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         check=True, timeout=120)
+    assert out.stdout.strip() == '[]', out.stdout
+
+
+def test_generator_obeys_the_contract_laws():
+    """The project's inverse model of the TRUE model explains the generated runs.
+
+    An independent check of both sides: the generator's laws and the contract's agree
+    when the force the true model leaves unexplained is a few percent of the drive force
+    (quantisation, noise and sampling only), on every kind of run.
+    """
+    from motor_comp.workbench import kinematics
+    from motor_comp.workbench.residual import residual
+    from motor_comp.workbench.session import default_hold
+    for names, axis, inp, rate, exc, bar in (
+            (('coulomb', 'viscous'), 'linear', 'voltage', 1000.0, 'sweep', 0.04),
+            (('ripple', 'offset', 'spring'), 'linear', 'force', 2000.0, 'chirp', 0.04),
+            (('coulomb', 'viscous', 'asymmetry'), 'linear', 'current', 500.0, 'sweep', 0.06),
+            (('coulomb', 'viscous', 'gravity'), 'rotary', 'current', 200.0, 'sweep', 0.08),
+            (('coulomb', 'viscous', 'delay'), 'linear', 'voltage', 1000.0, 'chirp', 0.04),
+            (('coulomb', 'viscous', 'backlash'), 'linear', 'voltage', 2000.0, 'sweep', 0.1),
+            (('coulomb', 'presliding'), 'linear', 'voltage', 2000.0, 'sweep', 0.1)):
+        rig, truth = draw_case(names, seed=5, axis=axis, input=inp, rate=rate)
+        gen = generate(truth, rig, excitation=exc, duration=15.0, seed=5)
+        true = as_model(truth)
+        kin = kinematics(gen.run, hold=default_hold(true))
+        nr = residual(kin, true).nrmse()
+        assert nr < bar, (names, nr)
+        # and the model without the planted effect named last is clearly worse (GMS and
+        # backlash act at reversals only: a smaller share of the samples)
+        worse = dict(truth, effects={n: p for n, p in truth['effects'].items()
+                                     if n != names[-1]})
+        assert residual(kin, as_model(worse)).nrmse() > 1.25 * nr, names
+
+
+def test_generator_makes_the_usual_experiment():
+    """A sweep is back-and-forth at six speeds in time order, with a quantised encoder."""
+    rig, truth = draw_case(('coulomb', 'viscous'), seed=3)
+    gen = generate(truth, rig, duration=60.0, seed=3)
+    run = gen.run
+    assert len(run) == 60000
+    v = run.reference_velocity
+    first = [float(np.max(np.abs(v[(run.t >= a) & (run.t < a + 2.0)]))) for a in (0.0, 10.0)]
+    assert first[0] < first[1]            # slow first
+    plateaus = np.unique(np.round(np.abs(v[np.abs(np.gradient(v)) < 1e-12]), 6))
+    assert len([p for p in plateaus if p > 0]) >= 6
+    reversals = np.sum(np.diff(np.sign(v[np.abs(v) > 1e-9])) != 0)
+    assert reversals >= 24
+    # encoder quantisation on the logged position
+    q = rig.encoder
+    assert np.allclose(run.position / q, np.round(run.position / q), atol=1e-6)
+
+
+# ---------------------------------------------------------------------- the must-show
+
+@pytest.fixture(scope='module')
+def outcomes():
+    """Every case of the suite with every seed (generated and fitted once)."""
+    return parallel_map(_evaluate_job, [(case, seed, DURATION) for case in CASES
+                                        for seed in SEEDS])
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    'issue 11 bar not met yet (open): 82 % of the 39 cases pass everything (bar 95 %); '
+    'misses: backlash, stribeck+delay combinations, ripple period precision; '
+    'see bench/README.md, "Workbench on an independent generator"'))
+def test_must_show_on_the_independent_suite(outcomes):
+    """≥ 95 % of cases: exact effects, mass within 3 %, parameters, NRMSE ≤ 1.1× truth."""
+    s = summary(outcomes)
+    failed = [f'{o.label} seed {o.seed}: {o.why()}' for o in outcomes if not o.passed]
+    report = json.dumps(s, indent=1) + '\n' + '\n'.join(failed)
+    assert s['passed'] >= EXACT_SHARE, report
+
+
+def test_independent_suite_does_not_regress(outcomes):
+    """What the method reaches today on the independent suite, as a floor.
+
+    Measured 2026-11-23: 82 % pass everything, 90 % exact effect sets, 95 % parameters
+    within tolerance, 87 % held-out NRMSE within 1.1× the true model, 97 % mass within 3 %.
+    The issue's 95 % bar is the strict-xfail test above; this one stops a regression.
+    """
+    s = summary(outcomes)
+    failed = [f'{o.label} seed {o.seed}: {o.why()}' for o in outcomes if not o.passed]
+    report = json.dumps(s, indent=1) + '\n' + '\n'.join(failed)
+    assert s['passed'] >= 0.75, report
+    assert s['exact'] >= 0.85, report
+    assert s['params_ok'] >= 0.90, report
+    assert s['mass_within_3pct'] >= 0.95, report
+    assert s['mass_err_p50'] <= 0.005, report
+
+
+def test_time_ordered_sweep_keeps_viscous_with_the_right_value(outcomes):
+    """The issue's first complaint: a sweep in time order still gets viscous friction."""
+    hits = [o for o in outcomes if o.label.startswith('coulomb+viscous [')]
+    assert hits
+    for o in hits:
+        assert 'viscous' in o.found, o.why()
+        fv = o.fitted['effects']['viscous']['fv']
+        assert math.isclose(fv, o.truth['effects']['viscous']['fv'], rel_tol=0.05), o.why()
+
+
+def test_wrong_parameter_is_reported_as_that_parameter(outcomes):
+    """Wrong fc / fv / gain / ripple amplitude: diagnose names it, --auto adds nothing.
+
+    ``diagnose``'s first finding is the refit (not a new effect), and among the
+    parameters it says are wrong is the one that was changed, with a value within the
+    suite's tolerance of the truth (the gain within 3 %); ``fit --auto`` adds no effect
+    and ends with the true parameters.
+    """
+    wrong = [o for o in outcomes if o.wrong]
+    assert len(wrong) >= 4
+    for o in wrong:
+        added = [s['effect'] for s in o.steps[1:] if s.get('action', 'add') == 'add'
+                 and s['effect'] not in ('refit', 'mass', None)]
+        assert not added, (o.label, added)
+        assert o.exact and o.params_ok, (o.label, o.why())
+        assert o.finding in ('refit', 'mass'), (o.label, o.finding)
+        eff, _, name = o.wrong[0].rpartition('.')          # e.g. coulomb.fc, input_gain
+        if name == 'amplitude':
+            name = 'amplitude_1'
+        named = {(e if e not in ('mass', 'input_gain') else '', n): v for e, n, v in o.changes}
+        assert (eff, name) in named, (o.label, o.changes)
+        truth = {(e, k): t for e, k, t, *_ in o.params}
+        tol = 0.03 if name == 'input_gain' else 0.05
+        assert math.isclose(named[(eff, name)], truth[(eff, name)], rel_tol=tol), \
+            (o.label, named, truth[(eff, name)])
+
+
+def test_fit_cli_json_on_an_mcap_written_by_the_logs_writer(tmp_path):
+    """The user path: MCAP written by motor_comp.logs, `motor-comp fit --auto --json`."""
+    import contextlib
+    import io
+
+    import yaml
+
+    from motor_comp.cli.main import main
+    from motor_comp.logs import write_run
+    case = Case(('coulomb', 'viscous', 'ripple'), rate=1000.0, mass_factor=0.6)
+    rig, truth = case.draw(11)
+    gen = generate(truth, rig, duration=DURATION, seed=11)
+    run_path, model_path = tmp_path / 'run.mcap', tmp_path / 'start.yaml'
+    write_run(run_path, gen.run)
+    model_path.write_text(yaml.safe_dump(case.start(truth)), encoding='utf-8')
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(io.StringIO()):
+        code = main(['fit', str(run_path), '--model', str(model_path), '--auto', '--json',
+                     '-o', str(tmp_path / 'fitted.yaml')])
+    assert code == 0
+    data = json.loads(buf.getvalue())
+    model = data['model']
+    assert set(model['effects']) == set(truth['effects']), data['steps']
+    errs = parameter_errors(truth, model)
+    assert all(e[-1] for e in errs), [e for e in errs if not e[-1]]
