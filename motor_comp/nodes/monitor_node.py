@@ -111,16 +111,26 @@ class MonitorNode(ParamNode):
         t = np.arange(400) * 1e-3
         window_health(t, 0.01 * np.sin(2 * np.pi * t), np.zeros_like(t), self.model)
         # served by the nodes' lean loop (common.run_node), like the loop's own topics;
-        # joint_states last: a plant that waits for this reader then finds both
         # every sample, like the recorder (KEEP_ALL): a sample lost on one topic and not
-        # on the other would shift the command/measurement pairing
-        self.mark_hot(self.create_subscription(Float64, TOPIC_VOLTAGE, self._on_command,
-                                               RECORD_QOS))
-        self.mark_hot(self.create_subscription(JointState, TOPIC_JOINT_STATES,
-                                               self._on_measurement, RECORD_QOS))
+        # on the other would shift the command/measurement pairing for good.  So, like
+        # the recorder, joint_states is subscribed only once the controller's voltage
+        # writer is matched: a lockstep plant waits for this reader, and its first
+        # commands could otherwise go out before the voltage writer knows this node.
+        self._volt_sub = self.mark_hot(self.create_subscription(
+            Float64, TOPIC_VOLTAGE, self._on_command, RECORD_QOS))
+        self._js_sub = None
+        self._match_timer = self.create_timer(0.05, self._subscribe_joint_states)
         self.get_logger().info(f'watching {self.p["model"]} over {self.p["window"]:g} s '
                                f'(WARN from NRMSE {self.p["warn_nrmse"]:g}, ERROR from '
                                f'{self.p["error_nrmse"]:g})')
+
+    def _subscribe_joint_states(self) -> None:
+        if self._volt_sub.get_publisher_count() < 1:
+            return
+        self.destroy_timer(self._match_timer)
+        self._match_timer = None
+        self._js_sub = self.mark_hot(self.create_subscription(
+            JointState, TOPIC_JOINT_STATES, self._on_measurement, RECORD_QOS))
 
     # -- messages --------------------------------------------------------------------
     def _on_measurement(self, msg: JointState) -> None:
