@@ -28,6 +28,7 @@ setup(
         'mcap>=1.1',
         'mcap-ros2-support>=0.5',
         'matplotlib>=3.7',
+        'threadpoolctl>=3.1',
         'setuptools',
     ],
     extras_require={

@@ -31,6 +31,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from motor_comp.threads import single_threaded_blas
 from motor_comp.errors import ParameterError
 from motor_comp.physics.axis import AxisKind, AxisModel, Units
 from motor_comp.workbench import ident as idm
@@ -612,6 +613,7 @@ class Engine:
                                correlations=tuple(est.correlations), spec=est.spec)
 
 
+@single_threaded_blas()
 def diagnose(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *, folds: int = 5,
              min_gain: float = 0.1, min_drop: float = 0.01,
              candidates: Sequence[str] | None = None, rotary: bool = False) -> Diagnosis:

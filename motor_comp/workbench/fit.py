@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Callable, Sequence
 
+from motor_comp.threads import single_threaded_blas
 from motor_comp.errors import ParameterError
 from motor_comp.physics.axis import AxisModel
 from motor_comp.workbench import ident as idm
@@ -85,6 +86,7 @@ def _params_text(est: idm.Estimate, name: str, units: Any) -> str:
     return ', '.join(fmt_param(name, k, v, se.get(k), units) for k, v in vals.items())
 
 
+@single_threaded_blas()
 def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
         add: Sequence[str] = (), auto: bool = False, folds: int = 5,
         min_gain: float = 0.1, min_drop: float = 0.01, max_steps: int = 10,
