@@ -273,6 +273,28 @@ class Data:
         for j, k in enumerate(keys):
             self._cache[self.key(k)] = np.ascontiguousarray(out[:, j])
 
+    def smooth_harmonics(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``S(sin(w_h·x))`` and ``S(cos(w_h·x))`` at the rows, shape ``(n, len(w))``.
+
+        ``w`` must be the harmonics ``h·w_1`` (h = 1, 2, …) of a spatial frequency
+        [rad/m]: they come from one sine and cosine per sample by the angle-addition
+        recurrence (a period search evaluates this thousands of times).
+        """
+        w = np.asarray(w, dtype=float)
+        nh = len(w)
+        out = []
+        for p in self.parts:
+            th = w[0] * np.asarray(p.x, dtype=float)
+            s1, c1 = np.sin(th), np.cos(th)
+            cols = np.empty((2 * nh, len(th)))
+            cols[0], cols[nh] = s1, c1
+            for h in range(1, nh):
+                cols[h] = cols[h - 1] * c1 + cols[nh + h - 1] * s1
+                cols[nh + h] = cols[nh + h - 1] * c1 - cols[h - 1] * s1
+            out.append(_smooth_rows(cols, p.rows, _kernel(p.W)))
+        both = np.concatenate(out)
+        return both[:, :nh], both[:, nh:]
+
     def key(self, key: tuple) -> tuple:
         """Cache key of a column: its own key and the motion it was computed on."""
         return key + (self.width0, self.motion)
@@ -837,8 +859,8 @@ def fit_ripple(D: Data, spec: Spec, rows: np.ndarray) -> tuple[float, int]:
         if h > 1 and h / period > 1.0 / max(min_p, 1e-12):
             break
         w = 2 * math.pi * np.arange(1, h + 1) / period
-        S = D.smooth_gather(lambda p: np.sin(np.outer(p.x, w)))[rows]
-        C = D.smooth_gather(lambda p: np.cos(np.outer(p.x, w)))[rows]
+        S, C = D.smooth_harmonics(w)
+        S, C = S[rows], C[rows]
         Z = np.column_stack([Xf, S, C, y])
         sse = solve_gram(Z.T @ Z)[1]
         bic = n_eff * math.log(max(sse, 1e-300)) + 2 * h * math.log(n_eff)
@@ -867,8 +889,8 @@ def refine_period(D: Data, spec: Spec, p0: float, nh: int, rows: np.ndarray) -> 
 
     def sse(period: float) -> float:
         w = 2 * math.pi * np.arange(1, nh + 1) / period
-        S = D.smooth_gather(lambda p: np.sin(np.outer(p.x, w)))[rows]
-        C = D.smooth_gather(lambda p: np.cos(np.outer(p.x, w)))[rows]
+        S, C = D.smooth_harmonics(w)
+        S, C = S[rows], C[rows]
         Z = np.column_stack([Xf, S, C, y])
         return solve_gram(Z.T @ Z)[1]
     dp = 1.5 * p0 * p0 / span
