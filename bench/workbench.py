@@ -31,8 +31,11 @@ from motor_comp.physics.axis import AxisModel  # noqa: E402
 from motor_comp.physics.effects import VOCABULARY  # noqa: E402
 from motor_comp.workbench import diagnose, fit, kinematics  # noqa: E402
 
-#: the previous method's time to diagnose a 60 s, 1 kHz run on this machine [s]
+#: the previous figures on this machine (idle), 60 s at 1 kHz [s]: diagnose 4.6 s when
+#: issue 11 was filed; the joint identification before its speed work (commit ab1ac9f,
+#: 2026-11-23) took 5.2 s to diagnose and 11.8 s for ``fit --auto``
 PREVIOUS_DIAGNOSE_60S = 4.6
+JOINT_DIAGNOSE_60S, JOINT_AUTO_60S = 5.2, 11.8
 #: goals of issue 11 [s]
 GOAL_DIAGNOSE, GOAL_AUTO = 1.0, 3.0
 from motor_comp.workbench.synthetic import recovered, scenario  # noqa: E402
@@ -124,10 +127,13 @@ def speed(lengths: list[float]) -> None:
           f'{PREVIOUS_DIAGNOSE_60S:g} s -> ratio {t60 / PREVIOUS_DIAGNOSE_60S:.2f}; '
           f'{60.0 / t60:.1f}x real time; simulating the run took {sim:.2f} s '
           f'(ratio {t60 / sim:.2f})')
+    print(f'          joint identification before its speed work {JOINT_DIAGNOSE_60S:g} s -> '
+          f'ratio {t60 / JOINT_DIAGNOSE_60S:.2f}')
     ta, names, mass = timed_auto(60.0)
     print(f'fit --auto from effects {{}} and a 2x mass: {ta:.2f} s  (goal <= '
           f'{GOAL_AUTO:g} s: {"met" if ta <= GOAL_AUTO else "NOT met"}); found '
-          f'{", ".join(names)}, mass {100 * (mass - 1):+.1f} %')
+          f'{", ".join(names)}, mass {100 * (mass - 1):+.1f} %; before the speed work '
+          f'{JOINT_AUTO_60S:g} s -> ratio {ta / JOINT_AUTO_60S:.2f}; {60.0 / ta:.1f}x real time')
     if not lengths:
         return
     print('\n## Diagnose time vs run length')

@@ -18,11 +18,13 @@ held-out block (hv-block CV, Racine 2000).  Per-block Gram matrices make a held-
 score a few small solves; data-driven choices (period, harmonic count, Stribeck basin,
 delay, GMS distance scale, gap width) are made inside each fold from its training blocks.
 
-Uncertainty (§5): a cluster-robust (block) sandwich covariance over the same blocks —
-residuals are coloured, so ``σ²(ΦᵀΦ)⁻¹`` is too small — with the nonlinear parameters
+Uncertainty (§5): residuals are coloured, so ``σ²(ΦᵀΦ)⁻¹`` is too small; the
+covariance is a delete-one-stretch jackknife over a few contiguous stretches of each run
+(regimes of a time-ordered experiment, so regime-to-regime disagreement of a model that
+does not quite fit counts too), with the nonlinear parameters (backlash width included)
 entering through their Gauss–Newton (linearised) columns; derived parameters (``x0``,
-``fs``, ``mgl``/``q0``, …) by the delta method.  Correlations near ±1 name the pairs
-this run cannot separate (§6).
+``fs``, ``mgl``/``q0``, …) by the delta method.  Correlations near ±1, from the
+block sandwich, name the pairs this run cannot separate (§6).
 """
 from __future__ import annotations
 
@@ -1164,7 +1166,7 @@ class Estimate:
     scalars : dict[str, dict[str, float]]
         Flat physical parameters per effect (and ``mass``).
     se : dict[str, dict[str, float]]
-        Their standard errors (cluster-robust sandwich + delta method).
+        Their standard errors (stretch jackknife + delta method).
     at_bound : dict[str, list[str]]
         Parameters held at a physical bound (``fc ≥ 0`` …).
     correlations : list of (str, str, float)
@@ -1259,7 +1261,9 @@ def estimate(D: Data, spec: Spec, model: AxisModel, *, cv: bool = True) -> Estim
     vals = {lab: float(v) for lab, v in zip(jl, phi)}
     idx = {lab: i for i, lab in enumerate(jl)}
     fitted, scalars, se, at_bound = decode(spec, model, vals, idx, cov)
-    corr = _correlations(cov, jl)
+    # correlations from the block sandwich: the jackknife's covariance has rank
+    # ≤ stretches − 1, so with more parameters than that it would show spurious ±1 pairs
+    corr = _correlations(_block_sandwich(D, Jm, e), jl)
     sse_cv = sc.sse_cv if sc is not None else float('nan')
     den = D.f_in_scale()
     nr = math.sqrt(sse_cv / den) if den > 0 and np.isfinite(sse_cv) else float('nan')
@@ -1271,7 +1275,7 @@ def estimate(D: Data, spec: Spec, model: AxisModel, *, cv: bool = True) -> Estim
 def _sandwich(D: Data, J: np.ndarray, e: np.ndarray) -> np.ndarray:
     """Delete-a-stretch jackknife covariance of the (Gauss–Newton) fit [CR3].
 
-    The record is cut into ``SE_CLUSTERS`` contiguous stretches of validation blocks;
+    Each run is cut into ``SE_CLUSTERS`` contiguous stretches of validation blocks;
     the covariance is the jackknife spread of the one-step estimates with one stretch
     left out, ``(G−1)/G·Σ_g (δ_g − δ̄)(δ_g − δ̄)ᵀ``, ``δ_g = (JᵀJ − J_gᵀJ_g)⁻¹J_gᵀe_g``.
     Two reasons over the cluster-robust sandwich with many short blocks: a stretch of a
@@ -1284,11 +1288,20 @@ def _sandwich(D: Data, J: np.ndarray, e: np.ndarray) -> np.ndarray:
     see that module's docstring.
     """
     p = J.shape[1]
-    nb = max(int(D.n_blocks), 1)
-    G = min(SE_CLUSTERS, nb)
+    # stretches within each run: a run of a multi-run experiment is often one regime
+    # (one torque level, one direction); leaving a whole run out would measure what
+    # the others cannot identify without it, not how well the model fits
+    cl = np.zeros(len(e), dtype=int)
+    G = 0
+    for i in np.unique(D.run_id):
+        m = D.run_id == i
+        b = D.block[m]
+        b0, nb = int(b.min()), int(b.max() - b.min()) + 1
+        g = min(SE_CLUSTERS, nb)
+        cl[m] = G + ((b - b0) * g) // nb
+        G += g
     if G < 2 or len(e) <= p:
         return np.full((p, p), np.nan)
-    cl = (D.block * G) // nb
     A = J.T @ J
     deltas = np.zeros((G, p))
     for c in range(G):
@@ -1303,6 +1316,25 @@ def _sandwich(D: Data, J: np.ndarray, e: np.ndarray) -> np.ndarray:
         deltas[c] = Ai @ (Jc.T @ e[m])
     deltas -= deltas.mean(axis=0)
     return (G - 1) / G * deltas.T @ deltas
+
+
+def _block_sandwich(D: Data, J: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Cluster-robust sandwich with the validation blocks as clusters (CR1).
+
+    Used for the correlations only (full rank as long as there are more blocks than
+    parameters); the standard errors come from :func:`_sandwich`.
+    """
+    G = J.T @ J
+    d = np.sqrt(np.maximum(np.diag(G), 1e-300))
+    try:
+        Ginv = np.linalg.pinv(G / np.outer(d, d), rcond=1e-12) / np.outer(d, d)
+    except np.linalg.LinAlgError:
+        return np.full(G.shape, np.nan)
+    nb = int(D.block.max()) + 1
+    S = np.zeros((nb, J.shape[1]))
+    np.add.at(S, D.block, J * e[:, None])
+    c = nb / max(nb - 1, 1) * (len(e) - 1) / max(len(e) - J.shape[1], 1)
+    return c * Ginv @ (S.T @ S) @ Ginv
 
 
 def _correlations(cov: np.ndarray, labels: list) -> list[tuple[str, str, float]]:
