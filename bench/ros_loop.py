@@ -10,7 +10,10 @@ private domain):
    any lockstep loop (a lockstep control step needs at least one plant↔controller
    round trip);
 2. lockstep — ``motor-comp run`` machinery, four node processes + recorder, control
-   steps per second of wall time (goal ≥ 2000 = 2× real time at 1 kHz);
+   steps per second of wall time (goals: ≥ 2000 = 2× real time at 1 kHz, and ≥ 0.75 ×
+   the ``spin_once`` reference, issue 14), and where its time goes: each node
+   process's CPU per step (all its threads, DDS included, from its ``resources:``
+   exit line) and the plant's waits for its readers' acknowledgements (``Pacer``);
 3. realtime — the same nodes on wall-clock timers at 1 kHz (PMLM + PID), with normal
    scheduling and with the default SCHED_FIFO ``realtime_priority``: the delay from
    a sample's publication to the next command's arrival at the plant (p50/p99/max,
@@ -104,6 +107,29 @@ def bare_round_trip(n: int, loop: str) -> float:
 
 
 _LOG_TIME = re.compile(r'\[INFO\] \[(\d+\.\d+)\] \[[^\]]*plant_node\]: (.*)')
+_LOOP_CPU = re.compile(r'resources: .*loop_cpu_s=([\d.]+)')
+_PACED = re.compile(r'paced on the readers\' acknowledgements (\d+) times, ([\d.]+) s')
+NODE_NAMES = ('plant_node', 'controller_node', 'trajectory_node', 'recorder_node')
+
+
+def loop_costs(workdir: Path, steps: int) -> dict[str, float]:
+    """CPU per lockstep step [µs] of each node process, and the plant's paced waits [s].
+
+    From the nodes' own exit lines: ``resources: … loop_cpu_s`` (the process's CPU time,
+    all its threads — DDS included — from its first loop callback to the end) and the
+    plant's ``paced on the readers' acknowledgements N times, S s``.
+    """
+    out: dict[str, float] = {}
+    for node in NODE_NAMES:
+        log = workdir / f'{node}.log'
+        text = log.read_text(errors='replace') if log.exists() else ''
+        m = _LOOP_CPU.search(text)
+        if m:
+            out[node] = float(m.group(1)) / steps * 1e6
+        paced = _PACED.search(text)
+        if paced:
+            out['paced_s'] = float(paced.group(2))
+    return out
 
 
 def lockstep_rate(duration: float, workdir: Path,
@@ -179,12 +205,13 @@ def main() -> int:
         ap.error('--lockstep-s must be > 0 and --realtime-s >= 0')
     # interleaved: the machine's load drifts (other work on the shared cores), so each
     # lockstep run sits between reference runs, and the medians are compared
-    rts, leans, rates = [], [], []
+    rts, leans, rates, costs = [], [], [], []
     for _ in range(args.repeat):
         rts.append(bare_round_trip(args.steps, 'executor'))
         leans.append(bare_round_trip(args.steps, 'lean'))
         with tempfile.TemporaryDirectory() as tmp:
             rate, steps = lockstep_rate(args.lockstep_s, Path(tmp), args.profile)
+            costs.append(loop_costs(Path(tmp), steps))
         rates.append(rate)
     rt, rt_lean, rate = (statistics.median(v) for v in (rts, leans, rates))
     if args.repeat > 1:
@@ -202,6 +229,13 @@ def main() -> int:
           f'{rt_lean / rt:>10.2f}   (wait-set loop the nodes use)')
     print(f'{"lockstep control steps/s, 4 nodes + recorder":<46} {rate:>12.0f} '
           f'{rate / rt:>10.2f}   ({steps} steps; ×{rate / 1000:.2f} real time at 1 kHz)')
+    # where the time goes: the loop is CPU-bound across its processes on a small machine
+    cpu = {k: statistics.median(c.get(k, float('nan')) for c in costs)
+           for k in (*NODE_NAMES, 'paced_s')}
+    total = sum(cpu[n] for n in NODE_NAMES)
+    print(f'{"lockstep CPU per step [µs], all processes":<46} {total:>12.0f}   ('
+          + ', '.join(f'{n.removesuffix("_node")} {cpu[n]:.0f}' for n in NODE_NAMES)
+          + f'; plant waited {cpu["paced_s"]:.3f} s on acknowledgements)')
     for prio, row in lat.items():
         label = f'realtime command delay at plant, priority {prio}'
         print(f'{label:<46} {row["p50/p99/max [ms]"]:>12}   ({row["commands"]} commands, '

@@ -41,6 +41,12 @@ Realtime: one command per *new* measurement, as a real drive does it:
   (:func:`~motor_comp.nodes.common.set_realtime_priority`): sample age at command
   p99 0.5 ms, max 1.5 ms instead of p99 2–4 ms, max 20 ms.
 
+Start: ``joint_states`` is subscribed only once a reference publisher is seen and
+``expected_subscribers`` readers (plant + recorder) matched this node's ``voltage``
+writer; the plant starts when it sees that subscription, so no reader of the loop misses
+command 0 (a volatile reader gets only what is published after the writer matched it,
+and a reader that sees the writer may not yet be seen by it).
+
 Reliability (issue 8):
 
 * stale data — if the reference or the measurement has not arrived for
@@ -102,8 +108,15 @@ BASE_PARAMS = (
           'set, a bad file is rejected and the old compensation stays'),
     Param('compensation_table', '', 'Position compensation table (CSV of motor-comp '
           'export-table), interpolated (empty = none; exclusive with compensation_model)'),
+    Param('expected_subscribers', 2, 'Readers of voltage (plant + recorder) that must have '
+          'matched this node\'s writer before it subscribes joint_states, so no reader '
+          'misses the first commands (after 10 s it goes on with a warning)', '', 0, 100,
+          read_only=True),
     REALTIME_PRIORITY,
 )
+
+#: how long a node waits for its expected peers before it goes on with a warning [s]
+MATCH_TIMEOUT = 10.0
 
 
 def gain_params(plant: PlantConfig) -> tuple[Param, ...]:
@@ -195,8 +208,9 @@ class ControllerNode(ManagedNode):
         # raw CDR: read_joint_state takes the numbers straight from the bytes
         self._ref_sub = self.mark_hot(self.create_subscription(
             JointState, TOPIC_REFERENCE, self._on_reference, SUB_QOS, raw=True))
-        # measurements only once the trajectory matched: the plant starts when it sees
-        # our joint_states reader, and reference 0 must not be missed
+        # measurements only once the trajectory matched and our voltage writer matched
+        # its expected readers: the plant starts when it sees our joint_states reader,
+        # and neither reference 0 nor command 0 may be missed by anyone
         self._since = now
         self._match_timer = self.create_timer(0.05, self._subscribe_measurements)
         self._watchdog_timer = self._make_watchdog(self.p['stale_timeout'])
@@ -225,8 +239,21 @@ class ControllerNode(ManagedNode):
         return self.create_timer(min(0.05, stale_timeout / 4), self._watchdog)
 
     def _subscribe_measurements(self) -> None:
-        if self._ref_sub.get_publisher_count() < 1 and time.monotonic() - self._since < 10.0:
-            return
+        # writer-side matching of our voltage writer: a reader that sees our writer may
+        # not yet be seen *by* it (DDS discovery is not symmetric in time), and a
+        # volatile reader gets only what is published after the writer matched it
+        readers = self.pub.get_subscription_count()
+        missing = []
+        if self._ref_sub.get_publisher_count() < 1:
+            missing.append('a reference publisher')
+        if readers < self.p['expected_subscribers']:
+            missing.append(f'{self.p["expected_subscribers"]} voltage readers (have '
+                           f'{readers})')
+        if missing:
+            if time.monotonic() - self._since < MATCH_TIMEOUT:
+                return
+            self.get_logger().warning(f'no {" and ".join(missing)} after '
+                                      f'{MATCH_TIMEOUT:g} s: subscribing joint_states anyway')
         self.destroy_timer(self._match_timer)
         self._match_timer = None
         self._meas_sub = self.mark_hot(self.create_subscription(
@@ -237,10 +264,15 @@ class ControllerNode(ManagedNode):
                 what: str, n: int) -> tuple[float, ...] | None:
         """Return the first ``n`` of position, velocity, effort (0 if absent) if finite."""
         _, pos, vel, eff = fields
-        if pos is not None and vel is not None:
-            vals = (pos, vel, 0.0 if eff is None else eff)[:n]
-            if all(math.isfinite(v) for v in vals):
-                return vals
+        if pos is not None and vel is not None:   # (no generator: this runs every step)
+            finite = math.isfinite
+            if n == 2:
+                if finite(pos) and finite(vel):
+                    return pos, vel
+            else:
+                acc = 0.0 if eff is None else eff
+                if finite(pos) and finite(vel) and finite(acc):
+                    return pos, vel, acc
         self.ignored += 1
         # one call site per kind: rclpy throttles per call site
         if what == 'reference':

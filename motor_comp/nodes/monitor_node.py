@@ -99,6 +99,8 @@ class MonitorNode(ParamNode):
         self._pending: collections.deque = collections.deque()
         self._early: collections.deque = collections.deque()
         self._lockstep = self.p['timing'] == 'lockstep'
+        if not self._lockstep:   # pairs with the newest measurement taken: arrival order
+            self.take_burst = 1
         self._last_eval: float | None = None
         self.level: Level | None = None
         self.verdicts = 0

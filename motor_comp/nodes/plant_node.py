@@ -49,8 +49,8 @@ from std_msgs.msg import Float64
 from motor_comp.errors import ParameterError
 from motor_comp.nodes.common import DEFAULT_NAMESPACE, DELAY_BIN_NS, DELAY_BINS, JOINT_NAME, \
     LOOP_QOS, REALTIME_PRIORITY, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, TOPIC_VOLTAGE, \
-    ManagedNode, Pacer, Param, Timing, format_delays, period_ns, run_node, set_realtime_priority, \
-    set_stamp
+    ManagedNode, Pacer, Param, Timing, format_delays, period_ns, read_float64, run_node, \
+    set_realtime_priority, set_stamp
 from motor_comp.physics import kernel as K
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.config import load_plant
@@ -162,11 +162,10 @@ class PlantNode(ManagedNode):
                           if self.timing is Timing.LOCKSTEP else None)
         # lockstep: never outrun a lagging reader (the recorder) by the writers' history.
         # Pacing joint_states alone bounds the recorder's lag on every topic (it reads them
-        # all in one thread); /clock's readers are in the loop and cannot lag.  Each paced
-        # wait costs ~70 ms of DDS acknowledgement round (measured: pacing both topics every
-        # 250 messages halved the lockstep rate, 2158 -> 964 steps/s).
-        self._js_out = (Pacer(self.pub_js, every=500) if self.pub_clock is not None
-                        else self.pub_js)
+        # all in one thread); /clock's readers are in the loop and cannot lag.  Once per
+        # history depth: a wait before the writer's history is full lasts until Fast DDS's
+        # 3 s heartbeat (see Pacer), and pacing every 250 messages had halved the rate
+        self._js_out = (Pacer(self.pub_js) if self.pub_clock is not None else self.pub_js)
         self._clock_out = self.pub_clock
         self.get_logger().info(
             f'{cfg.kind.value} plant from {cfg.source}, {self.timing.value}, '
@@ -177,7 +176,7 @@ class PlantNode(ManagedNode):
     def activate(self) -> None:
         """Subscribe ``voltage``; (re)start the run once the peers matched."""
         self._voltage_sub = self.mark_hot(self.create_subscription(
-            Float64, TOPIC_VOLTAGE, self._on_voltage, SUB_QOS))
+            Float64, TOPIC_VOLTAGE, self._on_voltage, SUB_QOS, raw=True))
         # both modes wait for their peers, so no early sample goes unanswered
         self._started = False
         self._waiting_since = time.monotonic()
@@ -266,8 +265,8 @@ class PlantNode(ManagedNode):
                                   throttle_duration_sec=1.0)
         return 0.0
 
-    def _on_voltage(self, msg: Float64) -> None:
-        u = self._command(float(msg.data))
+    def _on_voltage(self, msg: Float64 | bytes) -> None:
+        u = self._command(read_float64(msg))
         if self.timing is Timing.REALTIME:
             self._apply_realtime(u)
             return
@@ -359,10 +358,13 @@ class PlantNode(ManagedNode):
         for pub in (self.pub_js, self.pub_clock):
             if pub is not None and executor is not None:
                 pub.wait_for_all_acked(Duration(seconds=2.0))
-        paced = getattr(self._js_out, 'waits', None) if self.pub_js is not None else None
-        self.get_logger().info(f'stopped: {self.published} measurements published, '
-                               f'{self.k} steps, {self.refused} commands refused'
-                               + (f', {paced} reader waits timed out' if paced else ''))
+        pacer = getattr(self, '_js_out', None)
+        pacer = pacer if isinstance(pacer, Pacer) else None
+        self.get_logger().info(
+            f'stopped: {self.published} measurements published, {self.k} steps, '
+            f'{self.refused} commands refused'
+            + (f'; paced on the readers\' acknowledgements {pacer.paced} times, '
+               f'{pacer.wait_s:.3f} s, {pacer.waits} waits timed out' if pacer else ''))
 
     @property
     def done(self) -> bool:

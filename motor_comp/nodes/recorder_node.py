@@ -93,6 +93,9 @@ PARAMS = (
           1024, 64 * 1024 * 1024, read_only=True),
     Param('drain_time', 0.3, 'On shutdown, stop after the topics were quiet this long', 's',
           0.0, 10.0),
+    Param('batch_period', 0.002, 'Lockstep: take the queued messages in batches, pausing '
+          'this long after each batch (fewer wake-ups: CPU left to the loop\'s own '
+          'processes); 0 = wake for every message', 's', 0.0, 0.1, read_only=True),
     Param('match_timeout', 10.0, 'Wait this long for publishers on reference/voltage/clock '
           'before subscribing joint_states anyway', 's', 0.0, 600.0, read_only=True),
     Param('trace_memory', False, 'Diagnostics: trace Python allocations (tracemalloc) and '
@@ -191,6 +194,14 @@ class RecorderNode(ManagedNode):
         super().__init__('recorder_node', namespace=DEFAULT_NAMESPACE)
         self.declare_params(PARAMS)
         self.timing = Timing(self.p['timing'])
+        # lockstep: the loop never outruns the recorder by more than a writer's history
+        # (Pacer), commands pair with measurements by count, so batches may be taken
+        # topic by topic.  Realtime: a command is stamped with the newest measurement
+        # taken, so messages are taken one per topic and wait, in arrival order.
+        if self.timing is Timing.LOCKSTEP:
+            self.batch_pause = self.p['batch_period']
+        else:
+            self.take_burst = 1
         self.path = Path(self.p['output'])
         self.writer: McapRecorder | None = None
         self._segment = 0

@@ -19,6 +19,11 @@ its grid time, so the controller finds the reference of exactly its measurement'
 and a recording aligns reference and measurement without a hold error (ṙ·T ≈ 150 µm
 at 0.15 m/s when they are stamped at unrelated instants).
 
+Start: the node joins the loop (subscribes ``/clock``, or starts its realtime timer)
+only once ``expected_subscribers`` readers (controller + recorder) matched its
+``reference`` writer, and the plant starts only once it sees that subscription: no
+reader misses reference 0, whatever the order in which DDS discovery completes.
+
 Parameters: ``trajectory`` (``sine | p2p | cv | chirp``) and ``<kind>.<field>`` for
 every field of each trajectory class; changes are validated by building the new
 trajectory (rejected with the reason if invalid) and take effect at the next tick.
@@ -27,6 +32,7 @@ from __future__ import annotations
 
 import array
 import dataclasses
+import time
 from typing import Any, Mapping
 
 from rosgraph_msgs.msg import Clock
@@ -35,8 +41,8 @@ from sensor_msgs.msg import JointState
 from motor_comp.control.trajectories import TRAJECTORIES, Trajectory, make_trajectory
 from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, \
     REALTIME_PRIORITY, Param, ParamNode, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, \
-    TOPIC_REFERENCE, Timing, period_ns, run_node, set_realtime_priority, set_stamp, \
-    stamp_to_ns
+    TOPIC_REFERENCE, Timing, period_ns, read_clock_ns, run_node, set_realtime_priority, \
+    set_stamp, stamp_to_ns
 
 #: SI units of the trajectory fields, for the parameter descriptions
 _UNITS = {'amplitude': 'm', 'period': 's', 'offset': 'm', 'distance': 'm', 'move_time': 's',
@@ -67,8 +73,14 @@ PARAMS = (
           read_only=True),
     Param('control_rate', 1000.0, 'Realtime publish rate', 'Hz', 1.0, 100_000.0,
           read_only=True),
+    Param('expected_subscribers', 2, 'Readers of reference (controller + recorder) that '
+          'must have matched this node\'s writer before it joins the loop, so none misses '
+          'reference 0 (after 10 s it goes on with a warning)', '', 0, 100, read_only=True),
     REALTIME_PRIORITY,
 ) + _trajectory_params()
+
+#: how long the node waits for its expected readers before it goes on with a warning [s]
+MATCH_TIMEOUT = 10.0
 
 
 class TrajectoryNode(ParamNode):
@@ -87,20 +99,38 @@ class TrajectoryNode(ParamNode):
                                effort=array.array('d', [0.0]))
         self._msg.header.frame_id = JOINT_NAME
         self.pub = self.create_publisher(JointState, TOPIC_REFERENCE, LOOP_QOS)
-        if self.timing is Timing.LOCKSTEP:
-            self.mark_hot(self.create_subscription(Clock, TOPIC_CLOCK, self._on_clock,
-                                                   SUB_QOS))
-        else:
-            # trajectory time starts with the plant's first measurement; until then the
-            # start point r(0) is held so the controller has a reference from the start
-            self._t0_ns: int | None = None
-            self._held_ns = 0   # stamp of the last held start point
-            self._js_sub = self.create_subscription(JointState, TOPIC_JOINT_STATES,
-                                                    self._on_first_measurement, SUB_QOS)
-            self.mark_hot(self.create_timer(self.dt_ns * 1e-9, self._on_tick))
+        self._t0_ns: int | None = None
+        self._held_ns = 0   # realtime: stamp of the last held start point
+        # the plant starts when it sees our /clock (lockstep) or joint_states (realtime)
+        # reader: create it only once our reference writer matched its readers, so none
+        # of them misses reference 0 (a reader that sees our writer may not yet be seen
+        # by it: DDS discovery is not symmetric in time)
+        self._since = time.monotonic()
+        self._match_timer = self.create_timer(0.05, self._join_loop)
         self.get_logger().info(f'{self.timing.value} trajectory {self.trajectory.params()}')
         if self.timing is Timing.REALTIME:
             set_realtime_priority(self, self.p['realtime_priority'])
+
+    def _join_loop(self) -> None:
+        readers = self.pub.get_subscription_count()
+        if readers < self.p['expected_subscribers']:
+            if time.monotonic() - self._since < MATCH_TIMEOUT:
+                return
+            self.get_logger().warning(f'{readers} of {self.p["expected_subscribers"]} '
+                                      f'reference readers after {MATCH_TIMEOUT:g} s: '
+                                      f'starting anyway')
+        self.destroy_timer(self._match_timer)
+        self._match_timer = None
+        if self.timing is Timing.LOCKSTEP:
+            # raw CDR: the tick's time straight from the bytes (read_clock_ns)
+            self.mark_hot(self.create_subscription(Clock, TOPIC_CLOCK, self._on_clock,
+                                                   SUB_QOS, raw=True))
+        else:
+            # trajectory time starts with the plant's first measurement; until then the
+            # start point r(0) is held so the controller has a reference from the start
+            self._js_sub = self.create_subscription(JointState, TOPIC_JOINT_STATES,
+                                                    self._on_first_measurement, SUB_QOS)
+            self.mark_hot(self.create_timer(self.dt_ns * 1e-9, self._on_tick))
 
     @staticmethod
     def _build(values: Mapping[str, Any]) -> Trajectory:
@@ -123,14 +153,14 @@ class TrajectoryNode(ParamNode):
         msg.effort[0] = ref.acceleration
         self.pub.publish(msg)
 
-    def _on_clock(self, msg: Clock) -> None:
+    def _on_clock(self, msg: Clock | bytes) -> None:
         """Publish the reference one period ahead of the tick (and both at t = 0).
 
         The reference is a known function of time, so publishing r(t_{k+1}) on tick k
         takes the trajectory node off the loop's critical path (plant → controller →
         plant): the controller already holds r(t_{k+1}) when measurement k+1 arrives.
         """
-        t_ns = stamp_to_ns(msg.clock)
+        t_ns = read_clock_ns(msg)
         k, rem = divmod(t_ns, self.dt_ns)
         if rem:   # not on the control grid (foreign clock): publish for the tick itself
             self.publish_at(t_ns * 1e-9, t_ns)

@@ -77,7 +77,9 @@ def test_lifecycle_transitions_from_another_process(tmp_path: Path, nodes, probe
     overrides = {
         '/axis/plant_node': {'autostart': False, 'duration': STEPS * 1e-3,
                              'plant': 'ballscrew', 'expected_subscribers': 3},
-        '/axis/controller_node': {'autostart': False, 'plant': 'ballscrew'},
+        # voltage readers: plant, recorder, probe
+        '/axis/controller_node': {'autostart': False, 'plant': 'ballscrew',
+                                  'expected_subscribers': 3},
         '/axis/trajectory_node': {'trajectory': 'sine'},
         '/axis/recorder_node': {'autostart': False, 'output': str(out)},
     }

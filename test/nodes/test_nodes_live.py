@@ -46,7 +46,10 @@ def test_live_reconfiguration_and_fault_tolerance(tmp_path: Path, nodes, probe) 
     overrides = {
         '/axis/plant_node': {'duration': 0.0, 'expected_subscribers': 4,
                              'expected_clock_subscribers': 3},
-        '/axis/controller_node': {'stale_timeout': 0.3},
+        # every reader of voltage (plant, two recorders, probe) and of reference
+        # (controller, two recorders) is matched before the first message goes out
+        '/axis/controller_node': {'stale_timeout': 0.3, 'expected_subscribers': 4},
+        '/axis/trajectory_node': {'expected_subscribers': 3},
         '/axis/recorder_node': {'output': str(tmp_path / 'a.mcap')},
         '/axis/recorder_b': {'output': str(tmp_path / 'b.mcap'), 'chunk_size': 4096},
     }

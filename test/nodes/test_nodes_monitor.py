@@ -45,6 +45,9 @@ def test_monitor_live_friction_change_and_compensation_updates(tmp_path, nodes, 
         # the plant waits for the controller's, the monitor's and the probe's readers
         '/axis/plant_node': {'duration': 0.0, 'expected_subscribers': 3,
                              'expected_clock_subscribers': 1},
+        # voltage readers: plant, monitor, probe; reference readers: the controller
+        '/axis/controller_node': {'expected_subscribers': 3},
+        '/axis/trajectory_node': {'expected_subscribers': 1},
         '/axis/monitor_node': {'model': str(model), 'window': WINDOW,
                                'update_period': UPDATE},
     }

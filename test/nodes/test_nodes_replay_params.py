@@ -4,7 +4,6 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -28,9 +27,14 @@ def test_replay_publishes_recorded_run_with_timing(tmp_path: Path, ros_env, prob
               reference_velocity=np.cos(t), voltage=0.1 * t, name='synthetic')
     path = tmp_path / 'synthetic.mcap'
     write_run(path, run)
+    # when the replay *sent* each sample (the DDS source timestamp, set by the publishing
+    # process): the pacing is the replay's, measured without the probe's own scheduling —
+    # a probe descheduled on a loaded machine takes its backlog in one go, and arrival
+    # times taken in its callback compressed the slope to 0.36 (stress run, load 10)
     arrivals: list[float] = []
     probe.node.hot_subscriptions.append(probe.node.create_subscription(
-        JointState, 'joint_states', lambda m: arrivals.append(time.monotonic()), 10000))
+        JointState, 'joint_states',
+        lambda m, info: arrivals.append(info['source_timestamp'] * 1e-9), 10000))
     proc = subprocess.Popen([sys.executable, '-m', 'motor_comp.cli.main', 'replay',
                              str(path), '--rate', '2', '--wait-for-subscribers', '3',
                              '--startup-delay', '0.5', '--json'],
@@ -48,8 +52,8 @@ def test_replay_publishes_recorded_run_with_timing(tmp_path: Path, ros_env, prob
     np.testing.assert_array_equal(np.array(probe.positions), run.position)
     assert len(probe.voltages) == n
     np.testing.assert_array_equal(np.array(probe.voltages), run.voltage)
-    # paced at --rate 2: arrival time against recorded time has slope 1/2.  Theil–Sen
-    # (median of pairwise slopes) ignores the arrivals a loaded machine delays — the
+    # paced at --rate 2: send time against recorded time has slope 1/2.  Theil–Sen
+    # (median of pairwise slopes) ignores the samples a loaded machine delays — the
     # replay catches up after a stall (it paces on the absolute schedule) — while 1×
     # or unpaced replay (slopes 1 and ≈ 0) are far outside the bounds.
     slope = stats.theilslopes(np.array(arrivals) - arrivals[0], t).slope
