@@ -161,12 +161,13 @@ class PlantNode(ManagedNode):
         self.pub_clock = (self.create_publisher(Clock, TOPIC_CLOCK, LOOP_QOS)
                           if self.timing is Timing.LOCKSTEP else None)
         # lockstep: never outrun a lagging reader (the recorder) by the writers' history.
-        # Pacing joint_states alone bounds the recorder's lag on every topic (it reads them
-        # all in one thread); /clock's readers are in the loop and cannot lag.  Once per
-        # history depth: a wait before the writer's history is full lasts until Fast DDS's
-        # 3 s heartbeat (see Pacer), and pacing every 250 messages had halved the rate
+        # Every loop writer is paced (acknowledgements are per writer: pacing joint_states
+        # alone let the controller's voltage writer overwrite 51 commands a lagging
+        # recorder had not received).  Once per history depth: a wait before the writer's
+        # history is full lasts until Fast DDS's 3 s heartbeat (see Pacer), and pacing
+        # every 250 messages had halved the rate
         self._js_out = (Pacer(self.pub_js) if self.pub_clock is not None else self.pub_js)
-        self._clock_out = self.pub_clock
+        self._clock_out = Pacer(self.pub_clock) if self.pub_clock is not None else None
         self.get_logger().info(
             f'{cfg.kind.value} plant from {cfg.source}, {self.timing.value}, '
             f'{p["control_rate"]:g} Hz control, {physics:g} Hz physics')

@@ -40,7 +40,7 @@ from sensor_msgs.msg import JointState
 
 from motor_comp.control.trajectories import TRAJECTORIES, Trajectory, make_trajectory
 from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, \
-    REALTIME_PRIORITY, Param, ParamNode, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, \
+    REALTIME_PRIORITY, Pacer, Param, ParamNode, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, \
     TOPIC_REFERENCE, Timing, period_ns, read_clock_ns, run_node, set_realtime_priority, \
     set_stamp, stamp_to_ns
 
@@ -99,6 +99,8 @@ class TrajectoryNode(ParamNode):
                                effort=array.array('d', [0.0]))
         self._msg.header.frame_id = JOINT_NAME
         self.pub = self.create_publisher(JointState, TOPIC_REFERENCE, LOOP_QOS)
+        # lockstep: never outrun a lagging reader (the recorder) by the writer's history
+        self._pub_out = Pacer(self.pub) if self.timing is Timing.LOCKSTEP else self.pub
         self._t0_ns: int | None = None
         self._held_ns = 0   # realtime: stamp of the last held start point
         # the plant starts when it sees our /clock (lockstep) or joint_states (realtime)
@@ -151,7 +153,7 @@ class TrajectoryNode(ParamNode):
         msg.position[0] = ref.position   # in place: the message's own arrays
         msg.velocity[0] = ref.velocity
         msg.effort[0] = ref.acceleration
-        self.pub.publish(msg)
+        self._pub_out.publish(msg)
 
     def _on_clock(self, msg: Clock | bytes) -> None:
         """Publish the reference one period ahead of the tick (and both at t = 0).
