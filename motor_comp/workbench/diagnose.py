@@ -72,6 +72,14 @@ SEPARATE = {
 #: a constant offset copies coulomb, so they are not identifiable there and not offered
 #: (the constant force while sliding is named Coulomb friction; the notes say so)
 NEED_BOTH_DIRECTIONS = ('offset', 'asymmetry')
+#: the nonlinear parameter that sets each effect's shape: an effect whose force share is
+#: small (a backlash gap, a dead time) still pays when it removes most of what the model
+#: leaves and this parameter is pinned down by the run (see :meth:`Engine.resolved`)
+SHAPE_PARAM = {'delay': 'tau', 'backlash': 'width'}
+#: "most of what the model leaves": least held-out share of the residual removed
+RESOLVED_GAIN = 0.5
+#: "pinned down": largest standard error of the shape parameter relative to its value
+RESOLVED_REL_SE = 0.05
 
 
 LINEAR_UNITS = Units.of(AxisKind.LINEAR)
@@ -186,6 +194,8 @@ class CandidateResult:
     units: Units = LINEAR_UNITS
     correlations: tuple = ()
     spec: Any = None
+    #: the fit put one of the candidate's own parameters at its physical bound
+    at_bound: bool = False
 
     @property
     def title(self) -> str:
@@ -535,6 +545,9 @@ class Engine:
                                  'over the travel at several speeds')
         self.min_gain, self.min_drop = float(min_gain), float(min_drop)
         self.reversals = reversal_count(D)
+        x = D.gather(lambda p: p.x)
+        #: positions the runs cover [m or rad]
+        self.span = (float(x.min()), float(x.max()))
         self.both_ways = both_directions(D)
         self.den = D.f_in_scale()
         # the model as given, on the same rows and columns (no fitting)
@@ -557,6 +570,29 @@ class Engine:
               >= self.min_drop and bic < 0)
         return bool(ok), float(explained), float(bic)
 
+    def resolved(self, name: str, est: idm.Estimate, explained: float,
+                 bic: float) -> bool:
+        """Whether ``name`` pays although its force share is below ``min_drop``.
+
+        ``min_drop`` asks an effect to matter for the force (1 % of the drive force by
+        default), but a backlash gap or a dead time of a fraction of a millisecond
+        matters for the motion and for the other parameters (an unmodelled delay biases
+        the mass) while its force share is tiny.  Such an effect still pays when, on
+        held-out data, it removes most of what the model leaves (``RESOLVED_GAIN``),
+        the BIC improves, and the parameter that sets its shape is pinned down by the
+        run (standard error within ``RESOLVED_REL_SE`` of the value): structure the
+        model leaves from a slightly different law elsewhere (a stick at a reversal,
+        an integrator's detail) is fitted by a shape the run does not determine.
+        """
+        key = SHAPE_PARAM.get(name)
+        if key is None or not (explained >= max(RESOLVED_GAIN, self.min_gain) and bic < 0):
+            return False
+        val = est.scalars.get(name, {}).get(key)
+        se = est.se.get(name, {}).get(key)
+        if val is None or se is None or not (np.isfinite(se) and se > 0 and val != 0):
+            return False
+        return bool(se <= RESOLVED_REL_SE * abs(val))
+
     def h0(self, model: AxisModel) -> idm.Estimate:
         """Refit the model's own effects, every parameter (nonlinear ones re-searched)."""
         spec = idm.spec_of(model)
@@ -576,6 +612,14 @@ class Engine:
         est = idm.estimate(self.D, spec, base.model, cv=False)
         dp = idm.n_params(spec) - idm.n_params(base.spec)
         ok, explained, bic = self.pays(base.sse_cv, sse, dp)
+        bound = bool(est.at_bound.get(name)) or _unphysical(name, est, self.span)
+        if bound:
+            # the fit wants the effect outside its physical range (a Stribeck peak below
+            # the Coulomb level, a negative friction): the clipped effect in the model
+            # is not what was scored, and the structure is not this effect
+            ok = False
+        elif not ok:
+            ok = self.resolved(name, est, explained, bic)
         eff = est.model.get(name)
         scal = dict(est.scalars.get(name, {}))
         unc = {k: float(v) for k, v in est.se.get(name, {}).items()}
@@ -586,7 +630,7 @@ class Engine:
                                uncertainty=unc, scalars=scal, n_params=dp, bic_delta=bic,
                                supported=ok, model=est.model, changes=changes,
                                units=self.units, correlations=tuple(est.correlations),
-                               spec=est.spec)
+                               spec=est.spec, at_bound=bound)
 
     def refit_result(self, est: idm.Estimate) -> CandidateResult:
         """Turn the refit of the given model into a finding (``mass`` or ``refit``)."""
@@ -611,6 +655,37 @@ class Engine:
                                bic_delta=bic, supported=ok and bool(changes),
                                model=est.model, changes=changes, units=self.units,
                                correlations=tuple(est.correlations), spec=est.spec)
+
+
+def _unphysical(name: str, est: idm.Estimate, span: tuple[float, float]) -> bool:
+    """Whether the fitted ``name`` lies clearly outside its physical range.
+
+    A spring's rest position ``x0`` farther from the positions ``span`` covered than
+    the span itself is a constant force with a slight slope over the travel (an offset
+    by another name), not a spring the run can identify.  Direction-dependent friction
+    splits the friction levels, ``fc± = fc ± dfc/2`` and ``fv± = fv ± dfv/2``: with
+    neither level in the model there is nothing to split (its constant column is an
+    offset), and the Coulomb level, when present, must stay a friction both ways
+    (≥ 0, within two standard errors) — a larger split is a force that pushes one way
+    whatever the direction of motion.  A level not in the model yet is not judged (the
+    dry level may join later); the viscous split is left free (a slope that differs by
+    direction is what an asymmetric drive or a velocity-dependent gain looks like).
+    """
+    if name == 'spring':
+        x0 = est.model.get('spring').x0
+        width = span[1] - span[0]
+        return not span[0] - width <= x0 <= span[1] + width
+    if name != 'asymmetry':
+        return False
+    a = est.model.get('asymmetry')
+    se = est.se.get('asymmetry', {})
+    if not (est.model.has('coulomb') or est.model.has('viscous')):
+        return True
+    if not est.model.has('coulomb'):
+        return False
+    s = se.get('dfc', float('nan'))
+    slack = s if np.isfinite(s) else 0.0        # 2 SE of dfc/2 = SE of dfc
+    return bool(abs(a.dfc) / 2 - est.model.fc > slack)
 
 
 @single_threaded_blas()

@@ -11,8 +11,10 @@ fixed (the drive's data: a gain error scales every force and is reported by
 H0 is the starting model refitted; the forward step adds the candidate with the
 largest held-out gain if it pays (held-out gain, NRMSE drop and BIC, as in
 :mod:`.diagnose`); the backward step then drops every effect whose removal no longer
-hurts (a step with ``action: "remove"``).  Held-out errors come from the interleaved
-hv-block folds of :class:`~motor_comp.workbench.ident.Data`.
+hurts (a step with ``action: "remove"``).  When no single candidate pays, two strong
+ones that pay together are looked for (:func:`_pair`: a Stribeck curve and a dead time
+on a speed sweep each hide the other's worth).  Held-out errors come from the
+interleaved hv-block folds of :class:`~motor_comp.workbench.ident.Data`.
 """
 from __future__ import annotations
 
@@ -189,12 +191,16 @@ def _select(eng: Engine, est: idm.Estimate, steps: list, say: Callable[[str], No
                  if n not in removed_once]
         scored = [eng.score(est, n) for n in names]
         ok = [c for c in scored if c.supported]
-        if not ok:
-            say('nothing else pays for its parameters: done')
-            break
-        # the held-out BIC ranks: between two that explain the same, the one with fewer
-        # parameters (viscous before a Stribeck curve stretched over every speed)
-        best = min(ok, key=lambda c: c.bic_delta)
+        if ok:
+            # the held-out BIC ranks: between two that explain the same, the one with
+            # fewer parameters (viscous before a Stribeck curve stretched over every speed)
+            best = min(ok, key=lambda c: c.bic_delta)
+        else:
+            best = _pair(eng, est, scored)
+            if best is None:
+                say('nothing else pays for its parameters: done')
+                break
+            say(f'{best.effect} pays together with another effect (neither alone)')
         new = idm.estimate(eng.D, best.spec, best.model)
         if not new.sse_cv < est.sse_cv:
             say(f'{best.effect}: the held-out error did not fall: stopping')
@@ -209,16 +215,65 @@ def _select(eng: Engine, est: idm.Estimate, steps: list, say: Callable[[str], No
     return est
 
 
+#: a candidate that does not pay alone is tried in a pair when it removes at least this
+#: held-out share of the residual (it describes most of what is left, but the part it
+#: cannot describe hides its worth, and the effect that describes that part is hidden
+#: by it in turn — a Stribeck curve and a dead time on a speed sweep, each blurred by the
+#: other and by the mass that stands in for the delay)
+PAIR_GAIN = 0.5
+#: most candidates tried in pairs (the strongest by held-out BIC)
+PAIR_TOP = 3
+
+
+def _pair(eng: Engine, est: idm.Estimate, scored: Sequence[Any]) -> Any:
+    """Return the first of two effects that pay together when neither pays alone.
+
+    Each strong candidate (held-out gain ``PAIR_GAIN``, BIC improving, no parameter at a
+    physical bound) is fitted in, and the others are scored on top of it; the pair is
+    taken when the second then pays by the usual rule and the two together pay against
+    the current model for both their parameters.  The first is returned (the second is
+    added by the next forward step, and backward elimination still judges both).
+    """
+    strong = sorted((c for c in scored if not c.supported and not c.at_bound
+                     and c.explained >= max(PAIR_GAIN, eng.min_gain) and c.bic_delta < 0),
+                    key=lambda c: c.bic_delta)[:PAIR_TOP]
+    names = [c.effect for c in scored if not c.at_bound
+             and c.explained >= eng.min_gain and c.bic_delta < 0]
+    best = None
+    for c in strong:
+        first = idm.estimate(eng.D, c.spec, c.model)
+        for n in names:
+            if n == c.effect or n in first.spec.names:
+                continue
+            if n in ('stribeck', 'presliding') and 'coulomb' not in first.spec.names:
+                continue
+            second = eng.score(first, n)
+            if not second.supported:
+                continue
+            sse = first.sse_cv * (1.0 - second.explained)
+            dp = idm.n_params(second.spec) - idm.n_params(est.spec)
+            ok, _, bic = eng.pays(est.sse_cv, sse, dp)
+            if ok and (best is None or bic < best[0]):
+                best = (bic, c)
+    idm.sync(eng.D, est.spec, est.model)
+    return None if best is None else best[1]
+
+
 def _research(eng: Engine, est: idm.Estimate, just: str) -> idm.Estimate:
     """Re-search the nonlinear parameters of the effects already in, as H0 does.
 
     They were chosen against the residual of a smaller model (a ripple harmonic count
     picked before the friction was modelled is picked against the friction's residual);
     with ``just`` added they are chosen again by variable projection, and the new
-    choice is kept when the held-out error does not rise.
+    choice is kept when the held-out error does not rise; when any of them moved,
+    ``just`` itself is searched once more against their new values.
     """
-    for n in est.spec.names:
-        if n == just or n not in idm.NONLINEAR or n == 'presliding':
+    moved = False
+    # the others first, then the one just added again when any of them moved (its
+    # parameters were chosen against their old values: a dead time found before the
+    # Stribeck curve was re-searched trades against it through the mass)
+    for n in [m for m in est.spec.names if m != just] + [just]:
+        if n not in idm.NONLINEAR or n == 'presliding' or (n == just and not moved):
             continue
         eta = idm.best_eta(eng.D, est.spec, n, est.model)
         if eta == est.spec.eta.get(n):
@@ -226,6 +281,7 @@ def _research(eng: Engine, est: idm.Estimate, just: str) -> idm.Estimate:
         new = idm.estimate(eng.D, est.spec.with_(n, eta), est.model)
         if new.sse_cv <= est.sse_cv:
             est = new
+            moved = True
     idm.sync(eng.D, est.spec, est.model)
     return est
 
@@ -246,6 +302,7 @@ def _backward(eng: Engine, est: idm.Estimate, just: str, steps: list,
             sc = idm.cv_design(eng.D, X, idm.target(eng.D, spec))
             dp = idm.n_params(est.spec) - idm.n_params(spec)
             ok, explained, bic = eng.pays(sc.sse_cv, est.sse_cv, dp)
+            ok = ok or eng.resolved(n, est, explained, bic)
             if not ok and (worst is None or explained < worst[1]):
                 worst = (n, explained)
         idm.sync(eng.D, est.spec, est.model)

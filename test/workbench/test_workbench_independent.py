@@ -13,10 +13,11 @@ judged on:
   project's hidden-effect test (delay to 0.1 ms);
 * the held-out force NRMSE within 1.1× the NRMSE of the true model on the same data.
 
-The issue's bar: at least 95 % of cases pass.  The test runs every case of
-:data:`independent_generator.CASES` once (each case draws its own rig and parameters
-from the seed and its label) on 20 s runs, on two processes when there are two cores;
-``bench/workbench_independent.py`` runs several seeds per case and prints the table.
+The issue's bar: at least 95 % of cases pass, judged on seeds no fix was built on
+(:data:`FRESH_SEEDS`); seed 1, which the fixes were developed on, is the regression
+floor.  Every case of :data:`independent_generator.CASES` (each draws its own rig and
+parameters from the seed and its label) runs on 20 s runs, on two processes when there
+are two cores; ``bench/workbench_independent.py`` runs any seeds and prints the table.
 """
 from __future__ import annotations
 
@@ -46,6 +47,9 @@ NRMSE_RATIO = 1.1
 #: run length [s] of the test (the bench uses longer runs and more seeds)
 DURATION = 20.0
 SEEDS = (1,)
+#: seeds no change of the method was developed or checked on: the must-show is judged
+#: on these (the fixes of 2026-11-23 were built on seeds 1–2, where they pass 98.7 %)
+FRESH_SEEDS = (3, 4)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -279,14 +283,22 @@ def outcomes():
                                         for seed in SEEDS])
 
 
+@pytest.fixture(scope='module')
+def fresh_outcomes():
+    """Every case with the :data:`FRESH_SEEDS` (data the method was not tuned on)."""
+    return parallel_map(_evaluate_job, [(case, seed, DURATION) for case in CASES
+                                        for seed in FRESH_SEEDS])
+
+
 @pytest.mark.xfail(strict=True, reason=(
-    'issue 11 bar not met yet (open): 82 % of the 39 cases pass everything (bar 95 %); '
-    'misses: backlash, stribeck+delay combinations, ripple period precision; '
-    'see bench/README.md, "Workbench on an independent generator"'))
-def test_must_show_on_the_independent_suite(outcomes):
+    'issue 11 bar not met yet (open): on seeds 3-4, which no fix was built on, 88.5 % of '
+    'the 78 fits pass everything (bar 95 %); misses: a false dead time on a spring axis, '
+    'GMS element distances outside the fitted family, a spring before gravity on a rotary '
+    'axis, stribeck+ripple; see bench/README.md, "Workbench on an independent generator"'))
+def test_must_show_on_the_independent_suite(fresh_outcomes):
     """≥ 95 % of cases: exact effects, mass within 3 %, parameters, NRMSE ≤ 1.1× truth."""
-    s = summary(outcomes)
-    failed = [f'{o.label} seed {o.seed}: {o.why()}' for o in outcomes if not o.passed]
+    s = summary(fresh_outcomes)
+    failed = [f'{o.label} seed {o.seed}: {o.why()}' for o in fresh_outcomes if not o.passed]
     report = json.dumps(s, indent=1) + '\n' + '\n'.join(failed)
     assert s['passed'] >= EXACT_SHARE, report
 
@@ -294,18 +306,43 @@ def test_must_show_on_the_independent_suite(outcomes):
 def test_independent_suite_does_not_regress(outcomes):
     """What the method reaches today on the independent suite, as a floor.
 
-    Measured 2026-11-23: 82 % pass everything, 90 % exact effect sets, 95 % parameters
-    within tolerance, 87 % held-out NRMSE within 1.1× the true model, 97 % mass within 3 %.
-    The issue's 95 % bar is the strict-xfail test above; this one stops a regression.
+    Measured 2026-11-23 (seed 1, the 39 cases): 100 % pass everything (seeds 1–2, 78
+    fits: 98.7 %, one pre-sliding case missed).  The floor leaves room for three cases
+    to flip on float rounding; the issue's 95 % bar is the test above.
     """
     s = summary(outcomes)
     failed = [f'{o.label} seed {o.seed}: {o.why()}' for o in outcomes if not o.passed]
     report = json.dumps(s, indent=1) + '\n' + '\n'.join(failed)
-    assert s['passed'] >= 0.75, report
-    assert s['exact'] >= 0.85, report
-    assert s['params_ok'] >= 0.90, report
-    assert s['mass_within_3pct'] >= 0.95, report
+    assert s['passed'] >= 0.90, report
+    assert s['exact'] >= 0.90, report
+    assert s['params_ok'] >= 0.95, report
+    assert s['mass_within_3pct'] >= 0.97, report
     assert s['mass_err_p50'] <= 0.005, report
+
+
+#: cases the method once missed, each for a reason of its own (the seed that showed it):
+#: a dead time whose force share is below ``min_drop`` but that biases the mass 7 % when
+#: left out; a Stribeck curve and a dead time that each pay only once the other is in;
+#: a constant force taken as direction-dependent friction on an axis with no friction
+#: level to split; a backlash gap (a small force share, a gap the run pins down)
+FORMER_MISSES = (
+    ('coulomb+viscous+delay [lin vol 1000Hz sweep m2]', 2),
+    ('coulomb+viscous+stribeck+delay [lin vol 1000Hz sweep m2]', 1),
+    ('ripple+offset [lin for 2000Hz chirp m2]', 2),
+    ('coulomb+viscous+backlash [lin vol 2000Hz sweep m0.6]', 1),
+)
+
+
+@pytest.mark.parametrize('label,seed', FORMER_MISSES)
+def test_former_misses_are_found(label, seed):
+    """Exact effect set, parameters within tolerance, NRMSE within 1.1× the truth's."""
+    case = next(c for c in CASES if c.label == label)
+    o = evaluate(case, seed)
+    assert o.passed, o.why()
+    # the effect that was missed is now in the final model with its main parameter
+    missed = {'delay', 'stribeck', 'offset', 'backlash'} & o.expected
+    assert missed <= o.found, o.why()
+    assert all(ok for eff, *_, ok in o.params if eff in missed), o.params
 
 
 def test_time_ordered_sweep_keeps_viscous_with_the_right_value(outcomes):
