@@ -21,7 +21,7 @@ from numba import njit
 from motor_comp.physics import kernel as K
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.plant import Sensors, initial_state, pack_params
-from motor_comp.workbench.derivatives import Kinematics
+from motor_comp.workbench.derivatives import InputHold, Kinematics
 
 
 @dataclasses.dataclass(frozen=True)
@@ -156,42 +156,71 @@ def _reversals(position, hysteresis):
 
 
 def motor_position(kin: Kinematics, width: float, model: AxisModel,
-                   u: np.ndarray) -> np.ndarray:
+                   u: np.ndarray, *, tau: float = 0.0) -> np.ndarray:
     """Motor position [m] reconstructed from the load position across a backlash gap.
 
     Between reversals the motor pushes one edge of the gap, ``x_m = x_load ± width/2``.
-    At a reversal the (massless, DESIGN.md §3 backlash) load stops when the motor
-    reverses; the motor then flies freely across the gap under the model's own
-    dynamics, ``M·ẍ_m = F_in(u, ẋ_m) − Σ F_k(x_m, ẋ_m)``, until it has travelled the
-    width and takes the load along.  With the right width this flight ends when the
-    measured load starts moving again; with a wrong one it ends early (the load
-    appears stuck under a driving force) or late (the motor jumps when the load is
-    seen moving), and the force residual grows — which is what the width search
-    minimises.
+    The (massless, DESIGN.md §3 backlash) load stops at the instant the motor turns,
+    so a reversal of the load starts where its position comes to rest before moving
+    back — not at the extreme of a smoothed position, which a zero-phase filter moves
+    towards the end of the pause (measured on the independent generator: the flight
+    then started late, and the width search took the gap 40 % narrow to make up for
+    it).  From that instant the motor flies from rest across the gap under the model's
+    own dynamics, ``M·ẍ_m = F_in(u(t − τ), ẋ_m) − Σ F_k(x_m, ẋ_m)``, until it has
+    travelled the width and takes the load along.  With the right width this flight
+    ends when the measured load starts moving again; with a wrong one it ends early
+    (the load appears stuck under a driving force) or late (the motor jumps when the
+    load is seen moving), and the force residual grows — which is what the width
+    search minimises.
+
+    Any load reversal larger than the position noise is a gap crossing (the load only
+    comes back when the motor has crossed the whole gap), so reversals are found on
+    the raw position with a noise-sized hysteresis, whatever the trial width: a
+    closed-loop overshoot that moves the load back by less than the gap is a crossing
+    too.
 
     Parameters
     ----------
+    kin : Kinematics
+        The measured (load-side) run.
     width : float
         Gap [m].
     model : AxisModel
-        Model without backlash (its forces drive the flight).
+        Its forces drive the flight (its own ``backlash`` and ``delay`` are ignored).
     u : ndarray
-        Input seen by the axis at each sample (delay applied).
+        Logged input at each sample (not delayed), held or interpolated between the
+        samples as ``kin.hold`` says.
+    tau : float
+        Input dead time [s], applied inside the flight at the integrator's sub-step (a
+        shift by whole samples would move every flight by up to half a sample).
     """
     pos = kin.position
     if width <= 0:
         return pos.copy()
-    dpos = np.abs(np.diff(pos))
-    eps = max(3.0 * kin.noise_std(), 0.5 * float(np.min(dpos[dpos > 0], initial=0.0)))
-    rev = reversals(kin.x, max(width, 4 * eps + 1e-12))
+    eps = _position_tolerance(kin)
+    rev = reversals(pos, 4.0 * eps + 1e-12)
     side = np.zeros(len(pos))
-    moving = np.abs(kin.v) > 0.05 * np.max(np.abs(kin.v))
-    first = np.sign(kin.v[int(np.argmax(moving))])
-    d_prev = first if first != 0 else 1.0
+    if rev:
+        # the first stroke runs against the first reversal's new direction (a start
+        # transient of the velocity estimate can point the other way)
+        d_prev = -float(rev[0][1])
+    else:
+        moving = np.abs(kin.v) > 0.05 * np.max(np.abs(kin.v))
+        first = np.sign(kin.v[int(np.argmax(moving))])
+        d_prev = first if first != 0 else 1.0
+    starts = np.empty(len(rev), dtype=np.int64)
+    stops = np.empty(len(rev), dtype=np.int64)
+    rest = np.empty(len(rev))
+    dirs = np.empty(len(rev))
     last = 0
-    for k_ext, d_new in rev:
-        side[last:k_ext] = d_prev
-        last = k_ext
+    for j, (k_ext, d_new) in enumerate(rev):
+        # the pause of the load around its extreme: where the motor turned
+        i0, i1 = _stationary_runs(pos, k_ext, 2.0 * eps)
+        i0 = max(i0, last)
+        starts[j], stops[j], dirs[j] = i0, i1, d_new
+        rest[j] = float(np.median(pos[i0:i1 + 1]))
+        side[last:i0] = d_prev
+        last = i0
         d_prev = d_new
     side[last:] = d_prev
     xm = pos + 0.5 * width * side
@@ -199,37 +228,70 @@ def motor_position(kin: Kinematics, width: float, model: AxisModel,
         return xm
     # free flight across each gap, integrated by the compiled plant kernel (the one
     # implementation of the axis dynamics, stiction included) for the model at hand
-    starts = np.array([k for k, _ in rev], dtype=np.int64)
-    dirs = np.array([d for _, d in rev], dtype=float)
     ends = np.append(starts[1:], len(pos))
-    i1 = np.array([_stationary_runs(pos, k, eps)[1] for k in starts], dtype=np.int64)
-    horizon = np.minimum(ends - starts, 3 * (i1 - starts) + 2 * kin.window + 5)
+    horizon = np.maximum(np.minimum(ends - starts, 3 * (stops - starts) + 2 * kin.window + 5),
+                         0)
     n_sub = 10
     P = pack_params(model.without('backlash', 'delay'), Sensors(encoder_resolution=0.0),
                     kin.dt / n_sub)
     S0 = initial_state(P, 0.0)
-    _flights(P, S0, xm, pos, np.ascontiguousarray(u, dtype=float), starts, dirs,
-             horizon.astype(np.int64), float(width), n_sub)
+    _flights(P, S0, xm, np.ascontiguousarray(u, dtype=float), float(tau) / kin.dt,
+             kin.hold is InputHold.SAMPLE, starts, rest, dirs, horizon.astype(np.int64),
+             float(width), n_sub)
     return xm
 
 
+def _position_tolerance(kin: Kinematics) -> float:
+    """Return the band [m] a position at rest stays in: 3σ of the noise, half a count."""
+    dpos = np.abs(np.diff(kin.position))
+    return max(3.0 * kin.noise_std(), 0.5 * float(np.min(dpos[dpos > 0], initial=0.0)))
+
+
 @njit(cache=True)
-def _flights(P, S0, xm, pos, u, starts, dirs, horizon, width, n_sub):
+def _input_at(u, t, interpolate):
+    """Input at time ``t`` [samples]: held from the last stamp, or interpolated."""
+    n = u.shape[0]
+    if t <= 0.0:
+        return u[0]
+    i = int(np.floor(t + 1e-9))
+    if i >= n - 1:
+        return u[n - 1]
+    if interpolate:
+        return u[i] + (t - i) * (u[i + 1] - u[i])
+    return u[i]
+
+
+@njit(cache=True)
+def _flights(P, S0, xm, u, shift, interpolate, starts, rest, dirs, horizon, width, n_sub):
+    # ``shift`` = τ/dt [samples]: the input of each sub-step is taken at its middle, τ
+    # earlier (a whole-sample shift would move every flight by up to half a sample)
+    half = 0.5 * width
     for j in range(starts.shape[0]):
         k0 = starts[j]
         S = S0.copy()
-        x_start = pos[k0] - 0.5 * width * dirs[j]
+        # at rest against the old edge: the load rests at ``rest``, the motor turns
+        x_start = rest[j] - half * dirs[j]
         S[K.S_X] = x_start
         S[K.S_XL] = x_start
         S[K.S_V] = 0.0
         S[K.S_STUCK] = 1.0
         for step in range(horizon[j]):
             k = k0 + step
-            xm[k] = S[K.S_X]
             # contact with the far edge: the load is taken along from here on
-            if (S[K.S_X] - pos[k0]) * dirs[j] >= 0.5 * width:
+            if (S[K.S_X] - rest[j]) * dirs[j] >= half:
                 break
-            K.plant_advance(P, S, u[k], 0.0, n_sub)
+            xm[k] = S[K.S_X]
+            # sub-steps that see the same input go in one call (a held command changes
+            # once per sample at most)
+            s = 0
+            while s < n_sub:
+                val = _input_at(u, k + (s + 0.5) / n_sub - shift, interpolate)
+                e = s + 1
+                while e < n_sub and _input_at(u, k + (e + 0.5) / n_sub - shift,
+                                              interpolate) == val:
+                    e += 1
+                K.plant_advance(P, S, val, 0.0, e - s)
+                s = e
 
 
 def residual(kin: Kinematics, model: AxisModel, *, mask: np.ndarray | None = None) \
@@ -239,10 +301,9 @@ def residual(kin: Kinematics, model: AxisModel, *, mask: np.ndarray | None = Non
     dly = model.get('delay')
     u = kin.input_at(dly.tau if dly is not None else 0.0)
     if bl is not None and bl.width > 0:
-        # the flight is driven by the held command (what the plant integrates)
-        shift = int(round((dly.tau if dly is not None else 0.0) / kin.dt))
-        u_hold = np.concatenate([np.full(shift, kin.u[0]), kin.u[:len(kin.u) - shift]])
-        x, v, a = kin.derivatives(motor_position(kin, bl.width, model, u_hold))
+        # the flight is driven by the logged command itself (what the plant integrates)
+        x, v, a = kin.derivatives(motor_position(
+            kin, bl.width, model, kin.u, tau=dly.tau if dly is not None else 0.0))
     else:
         x, v, a = kin.x, kin.v, kin.a
     f_in = kin.smooth(model.input_force(u, v))
