@@ -41,8 +41,8 @@ from sensor_msgs.msg import JointState
 from motor_comp.control.trajectories import TRAJECTORIES, Trajectory, make_trajectory
 from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, \
     REALTIME_PRIORITY, Pacer, Param, ParamNode, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, \
-    TOPIC_REFERENCE, Timing, period_ns, read_clock_ns, run_node, set_realtime_priority, \
-    set_stamp, stamp_to_ns
+    TOPIC_REFERENCE, Timing, period_ns, read_clock_ns, read_joint_state, run_node, \
+    set_realtime_priority, set_stamp
 
 #: SI units of the trajectory fields, for the parameter descriptions
 _UNITS = {'amplitude': 'm', 'period': 's', 'offset': 'm', 'distance': 'm', 'move_time': 's',
@@ -103,6 +103,7 @@ class TrajectoryNode(ParamNode):
         self._pub_out = Pacer(self.pub) if self.timing is Timing.LOCKSTEP else self.pub
         self._t0_ns: int | None = None
         self._held_ns = 0   # realtime: stamp of the last held start point
+        self._js_sub = None   # realtime: the first measurement's reader, until t0
         # the plant starts when it sees our /clock (lockstep) or joint_states (realtime)
         # reader: create it only once our reference writer matched its readers, so none
         # of them misses reference 0 (a reader that sees our writer may not yet be seen
@@ -129,9 +130,13 @@ class TrajectoryNode(ParamNode):
                                                    SUB_QOS, raw=True))
         else:
             # trajectory time starts with the plant's first measurement; until then the
-            # start point r(0) is held so the controller has a reference from the start
-            self._js_sub = self.create_subscription(JointState, TOPIC_JOINT_STATES,
-                                                    self._on_first_measurement, SUB_QOS)
+            # start point r(0) is held so the controller has a reference from the start.
+            # Hot (served by the lean loop at once): the executor serves other entities
+            # only every EXECUTOR_PERIOD_NS (50 ms), and a first measurement seen 52 ms
+            # late made the reference jump 0.48 mm ahead at the start (a stress run)
+            self._js_sub = self.mark_hot(self.create_subscription(
+                JointState, TOPIC_JOINT_STATES, self._on_first_measurement, SUB_QOS,
+                raw=True))
             self.mark_hot(self.create_timer(self.dt_ns * 1e-9, self._on_tick))
 
     @staticmethod
@@ -177,10 +182,11 @@ class TrajectoryNode(ParamNode):
         # float (not ns·1e-9, which can differ in the last bit)
         self.publish_at(k * (1.0 / self.p['control_rate']), k * self.dt_ns)
 
-    def _on_first_measurement(self, msg: JointState) -> None:
+    def _on_first_measurement(self, msg: JointState | bytes) -> None:
+        # the subscription is dropped by the next tick (not here: the lean loop is
+        # still iterating its subscriptions)
         if self._t0_ns is None:
-            self._t0_ns = stamp_to_ns(msg.header.stamp)
-            self.destroy_subscription(self._js_sub)
+            self._t0_ns = read_joint_state(msg)[0]
 
     def _on_tick(self) -> None:
         now = self.get_clock().now().nanoseconds
@@ -188,6 +194,10 @@ class TrajectoryNode(ParamNode):
             self.publish_at(0.0, now)
             self._held_ns = now
             return
+        if self._js_sub is not None:
+            self.hot_subscriptions.remove(self._js_sub)
+            self.destroy_subscription(self._js_sub)
+            self._js_sub = None
         k_now = max(0, (now - self._t0_ns) // self.dt_ns)
         # stamps only increase: the held start point may be stamped just after t0
         self._next_k = max(self._next_k, (self._held_ns - self._t0_ns) // self.dt_ns + 1)
