@@ -14,24 +14,16 @@ import pytest
 from motor_comp.physics.effects import VOCABULARY
 from motor_comp.workbench import diagnose, fit, kinematics
 from motor_comp.workbench.synthetic import recovered, scenario
+from tolerances import TOLERANCE as _TOLERANCE
 
 #: effects of a linear axis (gravity is rotary-only: test_workbench_method.py has it)
 LINEAR_VOCABULARY = tuple(n for n in VOCABULARY if n != 'gravity')
 
 DURATION = 15.0   # s at 1 kHz: enough reversals and travel, and fast
 
-#: relative tolerance on each recovered parameter (absolute where stated)
-TOLERANCE = {
-    'coulomb': {'fc': 0.05},
-    'viscous': {'fv': 0.05},
-    'stribeck': {'fs': 0.15, 'vs': 0.4},
-    'presliding': {'stiffness': 0.3},
-    'ripple': {'period': 0.02, 'amplitude_1': 0.15},
-    'offset': {'f0': 0.05},
-    'spring': {'k': 0.1},
-    'asymmetry': {'dfc': 0.25, 'dfv': 0.1},
-    'backlash': {'width': 0.25},
-}
+#: relative tolerance on each recovered parameter (absolute where stated): shared with
+#: the independent generator's suite
+TOLERANCE = _TOLERANCE
 #: absolute tolerances [SI]
 ABS_TOLERANCE = {'delay': {'tau': 1e-3}, 'spring': {'x0': 2e-3}, 'stribeck': {'delta': 0.7}}
 
