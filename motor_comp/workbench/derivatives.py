@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 
 import numpy as np
 from scipy.signal import savgol_filter
@@ -111,9 +112,7 @@ class Kinematics:
         t, u = self.t, self.u
         if self.hold is InputHold.SAMPLE:
             return np.interp(t - tau, t, u)
-        # running integral of the hold signal, extended with u[0] before the first stamp
-        cum = np.concatenate([[0.0], np.cumsum(u) * self.dt])
-        tk = np.concatenate([t, [t[-1] + self.dt]])
+        cum, tk = self._hold_integral
         half = 0.5 * self.dt
 
         def integral(s: np.ndarray) -> np.ndarray:
@@ -124,8 +123,20 @@ class Kinematics:
 
         return (integral(t - tau + half) - integral(t - tau - half)) / self.dt
 
+    @functools.cached_property
+    def _hold_integral(self) -> tuple[np.ndarray, np.ndarray]:
+        # running integral of the hold signal at the stamps (and one step after the
+        # last): the same for every delay, and a delay search asks for hundreds
+        cum = np.concatenate([[0.0], np.cumsum(self.u) * self.dt])
+        return cum, np.concatenate([self.t, [self.t[-1] + self.dt]])
+
     def noise_std(self) -> float:
         """Robust estimate of the position measurement noise [m] (raw minus smoothed)."""
+        return self._noise_std
+
+    @functools.cached_property
+    def _noise_std(self) -> float:
+        # two medians over the whole run: computed once (the searches ask often)
         d = self.position - self.x
         return float(1.4826 * np.median(np.abs(d - np.median(d))))
 

@@ -197,6 +197,37 @@ def motor_position(kin: Kinematics, width: float, model: AxisModel,
     pos = kin.position
     if width <= 0:
         return pos.copy()
+    rev, starts, stops, dirs, rest, side = _pauses(kin)
+    xm = pos + 0.5 * width * side
+    if not rev:
+        return xm
+    # free flight across each gap, integrated by the compiled plant kernel (the one
+    # implementation of the axis dynamics, stiction included) for the model at hand
+    ends = np.append(starts[1:], len(pos))
+    horizon = np.maximum(np.minimum(ends - starts, 3 * (stops - starts) + 2 * kin.window + 5),
+                         0)
+    n_sub = 10
+    P = pack_params(model.without('backlash', 'delay'), Sensors(encoder_resolution=0.0),
+                    kin.dt / n_sub)
+    S0 = initial_state(P, 0.0)
+    _flights(P, S0, xm, np.ascontiguousarray(u, dtype=float), float(tau) / kin.dt,
+             kin.hold is InputHold.SAMPLE, starts, rest, dirs, horizon.astype(np.int64),
+             float(width), n_sub)
+    return xm
+
+
+def _pauses(kin: Kinematics) -> tuple:
+    """Reversals of the load, its pause at each, the rest positions, the stroke sides.
+
+    They depend on the measured position only, not on the gap: computed once per run
+    (kept on the run's :class:`Kinematics`) for the many widths a search tries.
+    Returns ``(rev, starts, stops, dirs, rest, side)``: ``side`` is ±1 per sample, the
+    direction of the stroke each sample belongs to.
+    """
+    hit = kin.__dict__.get('_backlash_pauses')
+    if hit is not None:
+        return hit
+    pos = kin.position
     eps = _position_tolerance(kin)
     rev = reversals(pos, 4.0 * eps + 1e-12)
     side = np.zeros(len(pos))
@@ -223,22 +254,10 @@ def motor_position(kin: Kinematics, width: float, model: AxisModel,
         last = i0
         d_prev = d_new
     side[last:] = d_prev
-    xm = pos + 0.5 * width * side
-    if not rev:
-        return xm
-    # free flight across each gap, integrated by the compiled plant kernel (the one
-    # implementation of the axis dynamics, stiction included) for the model at hand
-    ends = np.append(starts[1:], len(pos))
-    horizon = np.maximum(np.minimum(ends - starts, 3 * (stops - starts) + 2 * kin.window + 5),
-                         0)
-    n_sub = 10
-    P = pack_params(model.without('backlash', 'delay'), Sensors(encoder_resolution=0.0),
-                    kin.dt / n_sub)
-    S0 = initial_state(P, 0.0)
-    _flights(P, S0, xm, np.ascontiguousarray(u, dtype=float), float(tau) / kin.dt,
-             kin.hold is InputHold.SAMPLE, starts, rest, dirs, horizon.astype(np.int64),
-             float(width), n_sub)
-    return xm
+    out = (rev, starts, stops, dirs, rest, side)
+    # a frozen dataclass: the cache goes into the instance dict, like cached_property
+    kin.__dict__['_backlash_pauses'] = out
+    return out
 
 
 def _position_tolerance(kin: Kinematics) -> float:
