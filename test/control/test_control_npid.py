@@ -17,8 +17,9 @@ from hypothesis import given, settings, strategies as st
 from motor_comp.control import NPIDParams, default_trajectory, make_controller, simulate
 from motor_comp.control.controller import Q_KMAX
 from motor_comp.control.nominal import derive_nominal
-from motor_comp.control.npid import design_pid, frequency_grid, linear_plant_response, \
-    loop_margins, npid_gain, pid_response, popov_limit, sampled_loop, sampled_plant
+from motor_comp.control.npid import design_pid, discrete_pid_response, frequency_grid, \
+    linear_plant_response, loop_margins, npid_gain, pid_response, popov_limit, \
+    sampled_grid, sampled_loop, sampled_plant
 from motor_comp.control.trajectories import Sinusoid
 from motor_comp.physics import Sensors
 
@@ -41,17 +42,30 @@ def design(nominal):
     return design_pid(nominal.model, delay=TAU, control_period=T)
 
 
-def test_default_gains_are_the_sampled_design(design):
-    p, d = NPIDParams(), design.params
-    for name in ('kp', 'ki', 'kd', 'tf'):
-        assert getattr(p, name) == pytest.approx(getattr(d, name), rel=0.02), name
-    # a meaningful derivative filter: T_f ≈ 0.7·T (corner 228 Hz, below Nyquist)
-    assert 0.5 * T <= p.tf <= 2.0 * T
-    m = design.margins
-    assert m.gain_margin_db == pytest.approx(9.9, abs=0.3)
-    assert m.phase_margin_deg == pytest.approx(54.2, abs=1.0)
-    # the nearest achievable bandwidth (38.5 Hz needs more phase lead than a PID has)
-    assert 18.0 < m.bandwidth_hz < 24.0
+def test_default_gains_are_the_sampled_design(design, nominal):
+    """The shipped gains and a fresh design both meet the sampled-loop targets.
+
+    The design is not unique: with the derivative dominant, Kp and Ki trade along a
+    nearly flat valley of the margin targets (scipy 1.17's least squares ends at Kp 294,
+    the shipped gains, from an earlier scipy, at Kp 875 — both GM 9.9 dB, PM 54.1–54.2°,
+    bandwidth 21 Hz).  So the claim checked is the design's, on both: margins, the
+    widest bandwidth within 1 Hz, a meaningful derivative filter, integral action.
+    """
+    w = sampled_grid(T, 3000)
+    g = sampled_plant(nominal.model, delay=TAU, control_period=T).response(w)
+    for p in (NPIDParams(), design.params):
+        m = loop_margins(discrete_pid_response(p.kp, p.ki, p.kd, p.tf, w, control_period=T)
+                         * g, w)
+        assert m.gain_margin_db == pytest.approx(9.9, abs=0.3), p
+        assert m.phase_margin_deg == pytest.approx(54.2, abs=1.0), p
+        # the nearest achievable bandwidth (38.5 Hz needs more phase lead than a PID has)
+        assert 18.0 < m.bandwidth_hz < 24.0, p
+        assert m.bandwidth_hz == pytest.approx(design.margins.bandwidth_hz, abs=1.0), p
+        # a meaningful derivative filter: T_f ≈ 0.7–0.9·T (corner below Nyquist)
+        assert 0.5 * T <= p.tf <= 2.0 * T, p
+        # integral corner within a fifth of the crossover: the friction offset goes
+        assert p.ki / p.kp >= 2 * math.pi * m.crossover_hz / 5.0 * 0.95, p
+    assert NPIDParams().kd == pytest.approx(design.params.kd, rel=0.02)
 
 
 def _dt_loop(p, model, *, delay=TAU):
