@@ -1717,19 +1717,19 @@ def decode(spec: Spec, model: AxisModel, vals: dict, idx: dict, cov: np.ndarray)
         mass = model.mass
     out = model.without(*model.names).replace(mass=float(mass))
     effects = []
-    fc = 0.0
-    if 'coulomb' in names:
-        fc = scalars['coulomb']['fc']
-        if fc < 0:
-            at_bound.setdefault('coulomb', []).append('fc')
-            fc = 0.0
-        effects.append(make_effect('coulomb', {'fc': fc}))
+
+    def nonnegative(effect: str, key: str) -> float:
+        # a friction level below 0 is no friction: held at its bound, and said so
+        v = scalars[effect][key]
+        if v < 0:
+            at_bound.setdefault(effect, []).append(key)
+            v = 0.0
+        effects.append(make_effect(effect, {key: v}))
+        return v
+
+    fc = nonnegative('coulomb', 'fc') if 'coulomb' in names else 0.0
     if 'viscous' in names:
-        fv = scalars['viscous']['fv']
-        if fv < 0:
-            at_bound.setdefault('viscous', []).append('fv')
-            fv = 0.0
-        effects.append(make_effect('viscous', {'fv': fv}))
+        nonnegative('viscous', 'fv')
     if 'stribeck' in names:
         s = scalars['stribeck']
         fs = max(s['fs'], fc)
