@@ -276,7 +276,8 @@ class RunSpec:
                            # joint_states readers: controller, recorder (+ the realtime
                            # trajectory, which takes its time origin from it)
                            'expected_subscribers': 3 if self.timing == 'realtime' else 2},
-            'trajectory_node': {**common, 'trajectory': traj},
+            'trajectory_node': {**common, 'trajectory': traj,
+                                'duration': float(self.duration)},
             'controller_node': {**common, 'plant': self.plant, 'mode': self.controller,
                                 'feedforward': self.feedforward},
             'recorder_node': {'output': str(self.output), 'timing': self.timing},

@@ -330,9 +330,15 @@ class ControllerNode(ManagedNode):
     def _answer(self) -> None:
         """Lockstep: both halves of step k are here — compute and publish u_k."""
         t_ns = self._meas[0]
-        ref = self._refs.pop(t_ns)
-        for old in [k for k in self._refs if k < t_ns]:
-            del self._refs[old]
+        refs = self._refs
+        ref = refs.pop(t_ns)
+        # references arrive in stamp order (the trajectory publishes ahead, up to its
+        # lookahead): drop the older ones from the front, without scanning the rest
+        while refs:
+            oldest = next(iter(refs))
+            if oldest >= t_ns:
+                break
+            del refs[oldest]
         self._command(ref)
 
     def _newest(self, msg: JointState | bytes) -> JointState | bytes:

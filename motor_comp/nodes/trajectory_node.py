@@ -8,8 +8,14 @@ bit-identical references).  The message is a ``sensor_msgs/JointState`` named
 field and the adaptive controller's inertial feedforward needs it; carrying it here
 keeps the ROS loop numerically identical to the simulator.
 
-Lockstep: one reference per ``/clock`` tick, stamped with its time, published one
-control period ahead (on tick k the reference of tick k+1; both at tick 0).  Realtime: a
+Lockstep: one reference per control tick, stamped with its time, published ahead of the
+plant: on a ``/clock`` tick k (the plant publishes one every ``clock_every`` ticks) every
+reference up to tick k + ``lookahead`` not yet sent (from tick k itself when the clock
+restarts or repeats a tick).  The reference is a known
+function of time, so this takes the node off the loop's critical path, and it may take
+the ticks in batches (``batch_period``) instead of waking for each one: on two cores its
+wake-ups took CPU from the plant and the controller.  A parameter change therefore
+reaches the loop within ``lookahead`` ticks.  Realtime: a
 wall-clock timer at ``control_rate``; trajectory time starts at the stamp t0 of the
 plant's first measurement (the start point r(0), stamped with the wall clock, is held
 until then).  From then on each tick publishes the reference of the plant's sample grid
@@ -76,6 +82,16 @@ PARAMS = (
     Param('expected_subscribers', 2, 'Readers of reference (controller + recorder) that '
           'must have matched this node\'s writer before it joins the loop, so none misses '
           'reference 0 (after 10 s it goes on with a warning)', '', 0, 100, read_only=True),
+    Param('lookahead', 64, 'Lockstep: publish the reference this many control ticks ahead of '
+          '/clock (at most half the loop writers\' history); a parameter change reaches '
+          'the loop within this many ticks', 'ticks', 1, LOOP_QOS.depth // 2,
+          read_only=True),
+    Param('duration', 0.0, 'Lockstep: run length in sim time; no reference is published '
+          'for a tick past it (0 = no end), so the recording ends with the run', 's', 0.0,
+          1e7, read_only=True),
+    Param('batch_period', 0.002, 'Lockstep: take the queued /clock ticks in batches, pausing '
+          'this long after each batch (0 = wake for every tick); keep it well below '
+          'lookahead control periods of wall time', 's', 0.0, 0.05, read_only=True),
     REALTIME_PRIORITY,
 ) + _trajectory_params()
 
@@ -94,6 +110,13 @@ class TrajectoryNode(ParamNode):
         self.trajectory.at(0.0)   # load the compiled evaluator before the first tick
         self.dt_ns = period_ns(self.p['control_rate'])
         self._next_k = -1
+        self._sent_k = -1     # lockstep: the last tick whose reference was published
+        # lockstep: the last tick with a reference (the plant's last measurement is at
+        # n_steps − 1; its command answers it, the reference of tick n_steps closes the run)
+        self._last_k = (round(self.p['duration'] * self.p['control_rate'])
+                        if self.p['duration'] > 0 else None)
+        if self.timing is Timing.LOCKSTEP:
+            self.batch_pause = self.p['batch_period']
         self._msg = JointState(name=[JOINT_NAME], position=array.array('d', [0.0]),
                                velocity=array.array('d', [0.0]),
                                effort=array.array('d', [0.0]))
@@ -161,21 +184,28 @@ class TrajectoryNode(ParamNode):
         self._pub_out.publish(msg)
 
     def _on_clock(self, msg: Clock | bytes) -> None:
-        """Publish the reference one period ahead of the tick (and both at t = 0).
+        """Publish the references up to ``lookahead`` ticks ahead of this tick.
 
-        The reference is a known function of time, so publishing r(t_{k+1}) on tick k
-        takes the trajectory node off the loop's critical path (plant → controller →
-        plant): the controller already holds r(t_{k+1}) when measurement k+1 arrives.
+        The controller then already holds r(t_{k+1}) when measurement k+1 arrives, so
+        the node is off the loop's critical path (plant → controller → plant).  The plant
+        publishes ``/clock`` only every few ticks (``clock_every``).  A tick that does
+        not advance (tick 0 of a new run, a resume at a tick already seen) republishes
+        from the tick itself.
         """
         t_ns = read_clock_ns(msg)
         k, rem = divmod(t_ns, self.dt_ns)
         if rem:   # not on the control grid (foreign clock): publish for the tick itself
             self.publish_at(t_ns * 1e-9, t_ns)
             return
-        if k == 0 or k != self._next_k:
-            self._publish_step(k)
-        self._publish_step(k + 1)
-        self._next_k = k + 1   # the tick expected next
+        if k == 0 or k <= self._next_k - 1:
+            self._sent_k = k - 1
+        ahead = k + self.p['lookahead']
+        if self._last_k is not None:
+            ahead = min(ahead, self._last_k)
+        for j in range(max(self._sent_k + 1, k), ahead + 1):
+            self._publish_step(j)
+        self._sent_k = max(self._sent_k, ahead)
+        self._next_k = k + 1   # a later tick advances
 
     def _publish_step(self, k: int) -> None:
         # the simulator evaluates the trajectory at k·T with T = 1/rate: use the same
