@@ -5,9 +5,10 @@ Each run records with the recorder logging ``memory: rss_mib=… messages=…`` 
 ``--interval`` seconds; after the warm-up (``--warmup`` of the samples: allocator pools,
 DDS buffers, zstd context) a least-squares line RSS(messages) gives the steady growth
 with its standard error, reported per hour of 1 kHz lockstep recording (the issue's
-unit: 4 messages per step, 14.4 M messages per hour), and the growth between the
-warm-up and the end of the run.  ``--control`` repeats the run with ``discard:=true``:
-the same recorder, same DDS subscriptions and callbacks, but no MCAP writer — the
+unit: 3.1 messages per step, /clock every 10 ticks, 11.2 M messages per hour), and the
+growth between the warm-up and the end of the run.  ``--control`` repeats the run with
+``discard:=true``: the same recorder, same DDS subscriptions and callbacks, but no MCAP writer —
+the
 difference of the two slopes is what the writer costs; what the control itself grows
 is outside the recording code (rmw/DDS, allocator).
 
@@ -37,8 +38,9 @@ _RES = re.compile(r'\[[\w.]*?(\w+_node)\]: resources: cpu_s=([\d.]+) rss_start_m
                   r'rss_end_mib=([\d.]+)')
 _TIME = re.compile(r'\[INFO\] \[(\d+\.\d+)\] \[[\w.]*plant_node\]: (peers matched|run complete)')
 _MEM = re.compile(r'memory: rss_mib=([\d.]+) traced_mib=([\d.]+) messages=(\d+)')
-#: messages per hour of 1 kHz lockstep recording (reference, joint_states, voltage, clock)
-MSGS_PER_HOUR = 4 * 3_600_000
+#: messages per hour of 1 kHz lockstep recording: reference, joint_states and voltage each
+#: tick, /clock every ``clock_every`` (10) ticks
+MSGS_PER_HOUR = round((3 + 1 / 10) * 3_600_000)
 
 
 def slope_per_hour(samples: list[tuple[float, float, int]], warmup: float
