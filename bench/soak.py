@@ -7,10 +7,9 @@ DDS buffers, zstd context) a least-squares line RSS(messages) gives the steady g
 with its standard error, reported per hour of 1 kHz lockstep recording (the issue's
 unit: 3.1 messages per step, /clock every 10 ticks, 11.2 M messages per hour), and the
 growth between the warm-up and the end of the run.  ``--control`` repeats the run with
-``discard:=true``: the same recorder, same DDS subscriptions and callbacks, but no MCAP writer —
-the
-difference of the two slopes is what the writer costs; what the control itself grows
-is outside the recording code (rmw/DDS, allocator).
+``discard:=true``: the same recorder, same DDS subscriptions and callbacks, but no MCAP
+writer — the difference of the two slopes is what the writer costs; what the control
+itself grows is outside the recording code (rmw/DDS, allocator).
 
 Every node also logs ``resources: … rss_start_mib=… rss_end_mib=…`` at exit; the table
 shows them per node.
