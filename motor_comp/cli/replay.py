@@ -11,6 +11,7 @@ were live.  Ctrl-C stops cleanly.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib
 import json
 import sys
@@ -82,9 +83,34 @@ def _messages(path: Path, damage: list[tuple[int, str]] | None = None
                              f'`motor-comp analyze` to read what is recoverable') from None
 
 
+#: a message reached later than this after its scheduled send time counts as late [s]
+LATE_S = 0.005
+
+
+@dataclasses.dataclass(frozen=True)
+class ReplayResult:
+    """What a replay published, and how well it kept the recorded timing.
+
+    Attributes
+    ----------
+    published : dict[str, int]
+        Messages published per topic.
+    late : int
+        Messages reached more than :data:`LATE_S` after their scheduled send time (the
+        process was descheduled, or publishing is slower than the recorded rate); they
+        are sent at once, so the replay catches up with its absolute schedule.
+    max_late_s : float
+        The largest such lateness [s].
+    """
+
+    published: dict[str, int]
+    late: int = 0
+    max_late_s: float = 0.0
+
+
 def replay(path: Path, *, rate: float = 1.0, wait_for_subscribers: int = 0,
-           startup_delay: float = 1.0, timeout: float = 30.0) -> dict[str, int]:
-    """Publish ``path``'s topics at ``rate`` × recorded speed; counts per topic.
+           startup_delay: float = 1.0, timeout: float = 30.0) -> ReplayResult:
+    """Publish ``path``'s topics at ``rate`` × recorded speed; counts and lateness.
 
     ``rate`` 0 publishes as fast as possible.  Before the first message, waits until
     ``wait_for_subscribers`` readers have matched any replayed topic (at most
@@ -146,6 +172,7 @@ def replay(path: Path, *, rate: float = 1.0, wait_for_subscribers: int = 0,
         t0_log = None
         t0_wall = time.monotonic()
         last_clock = None
+        late, max_late = 0, 0.0
         for topic, _, log_ns, data in _messages(path):
             pub = pubs.get(topic)
             if pub is None:
@@ -156,6 +183,9 @@ def replay(path: Path, *, rate: float = 1.0, wait_for_subscribers: int = 0,
                 delay = t0_wall + (log_ns - t0_log) * 1e-9 / rate - time.monotonic()
                 if delay > 0:
                     time.sleep(delay)
+                elif delay < -LATE_S:
+                    late += 1
+                    max_late = max(max_late, -delay)
             if synth_clock and log_ns != last_clock:
                 set_stamp(clock.clock, log_ns)
                 clock_pub.publish(clock)
@@ -167,7 +197,7 @@ def replay(path: Path, *, rate: float = 1.0, wait_for_subscribers: int = 0,
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-    return counts
+    return ReplayResult(published=counts, late=late, max_late_s=max_late)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -191,11 +221,15 @@ def run(args: argparse.Namespace) -> int:
     require_ros('motor-comp replay')
     if args.startup_delay < 0 or args.wait_for_subscribers < 0:
         raise ParameterError('--startup-delay and --wait-for-subscribers must be >= 0')
-    counts = replay(args.run, rate=args.rate, wait_for_subscribers=args.wait_for_subscribers,
-                    startup_delay=args.startup_delay)
+    res = replay(args.run, rate=args.rate, wait_for_subscribers=args.wait_for_subscribers,
+                 startup_delay=args.startup_delay)
     if args.json:
-        print(json.dumps({'run': str(args.run), 'published': counts}))
+        print(json.dumps({'run': str(args.run), 'published': res.published,
+                          'late': res.late, 'max_late_s': res.max_late_s}))
     else:
-        for topic, n in counts.items():
+        for topic, n in res.published.items():
             print(f'{topic:<28} {n:>8} messages')
+        if res.late:
+            print(f'{res.late} messages sent more than {LATE_S * 1e3:g} ms behind the '
+                  f'recorded timing (at most {res.max_late_s * 1e3:.1f} ms)')
     return 0

@@ -1,6 +1,7 @@
 """``motor-comp replay`` as a live source, and the parameter-spec machinery of the nodes."""
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
@@ -56,9 +57,25 @@ def test_replay_publishes_recorded_run_with_timing(tmp_path: Path, ros_env, prob
     # (median of pairwise slopes) ignores the samples a loaded machine delays — the
     # replay catches up after a stall (it paces on the absolute schedule) — while 1×
     # or unpaced replay (slopes 1 and ≈ 0) are far outside the bounds.
+    report = json.loads(out)
+    assert report['published']['/axis/joint_states'] == n
+    # Timing is only checked when the scheduler let the replay keep it: a replay that
+    # reached many messages late (descheduled; it then sends them at once to catch up
+    # with its absolute schedule) says so itself, and a stress run at load 10 saw
+    # slopes of 0.22–0.37 from such bursts.  An unpaced or 1× replay reports itself on
+    # time, so the slope bounds still catch it.
+    late_share = report['late'] / (2 * n)   # joint_states + voltage
+    if late_share > MAX_LATE_SHARE:
+        pytest.skip(f'the scheduler did not let the replay keep its timing: '
+                    f'{report["late"]} of {2 * n} messages sent > 5 ms late (at most '
+                    f'{1e3 * report["max_late_s"]:.0f} ms); pacing not checked')
     slope = stats.theilslopes(np.array(arrivals) - arrivals[0], t).slope
-    assert 0.4 < slope < 0.6, slope
-    assert '"/axis/joint_states": 500' in out
+    assert 0.4 < slope < 0.6, (slope, report)
+
+
+#: late messages a replay may have and still be judged on its pacing (Theil–Sen
+#: tolerates ~29 % outliers)
+MAX_LATE_SHARE = 0.1
 
 
 def test_replay_bad_file_is_one_line_error(tmp_path: Path) -> None:
