@@ -108,6 +108,10 @@ class _RunPart:
     v: np.ndarray               # laws (backlash changes them)
 
 
+#: memory for cached smoothed columns of one fit [bytes]
+COLUMN_CACHE_BYTES = 256 * 2**20
+
+
 class Data:
     """One identification experiment: the sliding samples of one or more runs.
 
@@ -209,6 +213,10 @@ class Data:
         self.motion = 0
         self._motions = 0
         self._cache: dict = {}
+        #: cached smoothed columns: a fitting run's searches reuse ~1500 of them (delay,
+        #: GMS, Stribeck trials across the rounds of --auto); clearing the cache at 400
+        #: recomputed them 34 times in one fit.  Bounded by memory (COLUMN_CACHE_BYTES).
+        self._cache_max = max(400, COLUMN_CACHE_BYTES // (8 * max(self.n, 1)))
         self._gram: dict = {}
         self._row_sets: dict = {}
         self._a = None
@@ -255,7 +263,7 @@ class Data:
             out = np.concatenate([_smooth_at(p, np.asarray(fn(p), dtype=float))
                                   for p in self.parts])
         if key is not None:
-            if len(self._cache) > 400:
+            if len(self._cache) > self._cache_max:
                 self._cache.clear()
             self._cache[k] = out
         return out
@@ -271,7 +279,7 @@ class Data:
             return
         out = np.concatenate([_smooth_at(p, np.asarray(fn(p), dtype=float))
                               for p in self.parts])
-        if len(self._cache) > 400:
+        if len(self._cache) > self._cache_max:
             self._cache.clear()
         for j, k in enumerate(keys):
             self._cache[self.key(k)] = np.ascontiguousarray(out[:, j])
@@ -1272,8 +1280,14 @@ def _design_for(D: Data, spec: Spec, model: AxisModel) -> tuple[np.ndarray, np.n
 
 
 def best_eta(D: Data, spec: Spec, name: str, model: AxisModel,
-             rows: np.ndarray | None = None) -> Any:
-    """Nonlinear parameters of ``name`` in ``spec`` fitted on ``rows`` (all by default)."""
+             rows: np.ndarray | None = None, *, stop_above: float = math.inf) -> Any:
+    """Nonlinear parameters of ``name`` in ``spec`` fitted on ``rows`` (all by default).
+
+    A grid, then a local search from its best point.  When even the grid's best SSE is
+    above ``stop_above`` (a screened candidate that cannot pay), the grid point is
+    returned without the local search: it is most of the cost, and on a fitting run
+    most candidates are absent effects scored round after round.
+    """
     rows = np.ones(D.n, dtype=bool) if rows is None else rows
     sync(D, spec.without(name), model)
     if name == 'ripple':
@@ -1287,6 +1301,8 @@ def best_eta(D: Data, spec: Spec, name: str, model: AxisModel,
         costs.append(_vp_sse(D, s, rows))
     i = int(np.argmin(costs))
     eta = trials[i]
+    if costs[i] > stop_above:
+        return eta
     if name == 'stribeck':
         vs_hi = max(t[0] for t in trials)
 
@@ -1369,17 +1385,19 @@ def cv_candidate(D: Data, spec: Spec, name: str, model: AxisModel, *,
         s = spec.with_(name)
         X, _ = columns(D, s)
         return cv_design(D, X, target(D, s)).sse_cv, None
+    sse0 = _vp_sse(D, spec) if screen > 0 else math.inf
     if name == 'ripple':
         eta_all = best_eta(D, spec.with_('ripple', (1.0, 1)), 'ripple', model)
     else:
         trials = _eta_trials(D, spec, name, model)
-        eta_all = best_eta(D, spec.with_(name, trials[0]), name, model)
+        # a grid optimum below half the screen's gain skips the local search
+        eta_all = best_eta(D, spec.with_(name, trials[0]), name, model,
+                           stop_above=sse0 * (1.0 - 0.5 * screen))
     if screen > 0:
         s1 = spec.with_(name, eta_all)
         X1, _ = _design_for(D, s1, model)
         sse1 = _vp_sse(D, s1)
         sync(D, spec, model)
-        sse0 = _vp_sse(D, spec)
         if sse0 <= 0 or 1.0 - sse1 / sse0 < screen:
             X, y = _design_for(D, s1, model)
             out = cv_design(D, X, y).sse_cv
