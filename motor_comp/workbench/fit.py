@@ -286,9 +286,20 @@ def _research(eng: Engine, est: idm.Estimate, just: str) -> idm.Estimate:
     return est
 
 
+#: effects that carry the model's constant force when there is no offset (a spring's
+#: ``c``, an asymmetry's ``dfc`` while sliding): backward elimination also tries them
+#: replaced by an offset, the constant alone
+CONSTANT_CARRIERS = ('spring', 'asymmetry')
+
+
 def _backward(eng: Engine, est: idm.Estimate, just: str, steps: list,
               say: Callable[[str], None], removed_once: set) -> idm.Estimate:
-    """Drop effects whose removal no longer hurts (once each), worst first."""
+    """Drop effects whose removal no longer hurts (once each), worst first.
+
+    An effect that carries the constant force (:data:`CONSTANT_CARRIERS`) is also tried
+    as an offset: a spring added early for a constant force (or for gravity, before the
+    ``gravity`` term was in) is replaced by the offset once its slope no longer pays.
+    """
     while True:
         worst = None
         for n in est.spec.names:
@@ -296,22 +307,33 @@ def _backward(eng: Engine, est: idm.Estimate, just: str, steps: list,
                 continue
             if n == 'coulomb' and ({'stribeck', 'presliding'} & set(est.spec.names)):
                 continue
-            spec = est.spec.without(n)
-            idm.sync(eng.D, spec, est.model)
-            X, _ = idm.columns(eng.D, spec)
-            sc = idm.cv_design(eng.D, X, idm.target(eng.D, spec))
-            dp = idm.n_params(est.spec) - idm.n_params(spec)
-            ok, explained, bic = eng.pays(sc.sse_cv, est.sse_cv, dp)
-            ok = ok or eng.resolved(n, est, explained, bic)
-            if not ok and (worst is None or explained < worst[1]):
-                worst = (n, explained)
+            trials = [est.spec.without(n)]
+            if n in CONSTANT_CARRIERS and 'offset' not in est.spec.names:
+                trials.append(est.spec.without(n).with_('offset'))
+            for spec in trials:
+                idm.sync(eng.D, spec, est.model)
+                X, _ = idm.columns(eng.D, spec)
+                sc = idm.cv_design(eng.D, X, idm.target(eng.D, spec))
+                dp = idm.n_params(est.spec) - idm.n_params(spec)
+                ok, explained, bic = eng.pays(sc.sse_cv, est.sse_cv, dp)
+                ok = ok or eng.resolved(n, est, explained, bic)
+                if not ok and (worst is None or explained < worst[1]):
+                    worst = (n, explained, spec)
         idm.sync(eng.D, est.spec, est.model)
         if worst is None:
             return est
-        n = worst[0]
-        new = idm.estimate(eng.D, est.spec.without(n), est.model)
-        est = new
+        n, _, spec = worst
+        swapped = 'offset' in spec.names and 'offset' not in est.spec.names
+        est = idm.estimate(eng.D, spec, est.model)
         removed_once.add(n)
+        if swapped:
+            why = f'replaced {n} by an offset: only its constant force still pays'
+            steps.append(FitStep(n, est.nrmse_cv, est.model, why, 'remove'))
+            steps.append(FitStep('offset', est.nrmse_cv, est.model,
+                                 f'added offset: {_params_text(est, "offset", eng.units)}',
+                                 'add'))
+            say(f'{why}; force NRMSE {100 * est.nrmse_cv:.1f} %')
+            continue
         steps.append(FitStep(n, est.nrmse_cv, est.model,
                              f'removed {n}: no longer pays once the others are in', 'remove'))
         say(f'removed {n}: no longer pays once the others are in; force NRMSE '

@@ -1130,7 +1130,7 @@ def fit_ripple(D: Data, spec: Spec, rows: np.ndarray) -> tuple[float, int]:
     period = refine_period(D, base, p0, nh0, rows)
     x = D.gather(lambda p: p.x)
     v = np.abs(D.gather(lambda p: p.v))[rows]
-    min_p = 4.0 * D.kins[0].dt * float(np.percentile(v, 90))
+    min_p = 4.0 * D.kins[0].dt * float(np.percentile(v, 50))
     Xf, _ = columns(D, base)
     y = target(D, base)
     Xf, y = Xf[rows], y[rows]
