@@ -309,14 +309,27 @@ class RecorderNode(ManagedNode):
             self._param_timer = None
         self._segment = 0
 
+    def _params_pending(self) -> list[str]:
+        """Nodes that are up (their parameter services answer) but not yet recorded."""
+        return [n for n, c in self._param_clients.items()
+                if n not in self._raw_params and c.services_are_ready()]
+
     def _subscribe_joint_states(self) -> None:
+        # also wait until the running nodes' parameters are stored: the plant starts
+        # when it sees this reader, and a short lockstep run (1.5 s of sim time, 0.5 s
+        # of wall time) had ended, and the plant's parameter service with it, before a
+        # starved recorder got its answer (a stress run lost ``params:plant_node``)
         unmatched = [k for k, sub in self._subs.items() if sub.get_publisher_count() < 1]
+        pending = self._params_pending()
         waited = time.monotonic() - self._since
-        if unmatched and waited < self.p['match_timeout']:
+        if (unmatched or pending) and waited < self.p['match_timeout']:
             return
         if unmatched:
             self.get_logger().warning(f'no publisher on {", ".join(unmatched)} after '
                                       f'{waited:.0f} s: recording without waiting')
+        if pending:
+            self.get_logger().warning(f'no parameters from {", ".join(pending)} after '
+                                      f'{waited:.0f} s: recording without them')
         self.destroy_timer(self._match_timer)
         self._match_timer = None
         self._js_sub = self.mark_hot(self.create_subscription(*self._js_args, RECORD_QOS,
