@@ -28,6 +28,7 @@ import yaml
 
 from motor_comp.cli.common import add_json, check_output_file, positive_float
 from motor_comp.errors import MotorCompError, ParameterError
+from motor_comp.nodes import PARENT_ENV
 
 NODES = ('recorder_node', 'controller_node', 'trajectory_node', 'plant_node')
 MODES = ('pid', 'adaptive_sliding', 'npid')
@@ -190,7 +191,9 @@ class NodeGroup:
             ros_args += ['--params-file', str(params_file)]
         cmd = [sys.executable, '-m', f'motor_comp.nodes.{node}', *ros_args, *extra]
         with open(log, 'wb') as out:
-            popen = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=self.env,
+            # the node stops by itself when this process is gone (PARENT_ENV)
+            env = {**self.env, PARENT_ENV: str(os.getpid())}
+            popen = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env,
                                      stdin=subprocess.DEVNULL, start_new_session=True)
         proc = NodeProcess(name, popen, log)
         self.procs[name] = proc

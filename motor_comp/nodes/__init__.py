@@ -51,3 +51,10 @@ their parameter services and writes a ``params:<node>`` metadata record per node
 soon as they answer; runtime changes (``/parameter_events``) go into a
 ``parameter_changes`` record at the end.
 """
+
+#: environment variable: the pid of the process that started a node; when it is gone
+#: (the node is re-parented), the node stops as on SIGINT.  Set by ``NodeGroup``
+#: (``motor-comp run``, the demo, the node tests), so a test run or a CLI that is killed
+#: leaves no loop running on: an orphaned lockstep loop of a killed stress run had kept
+#: publishing for 90 min in a ROS domain id that later runs reused.
+PARENT_ENV = 'MOTOR_COMP_EXIT_WITH_PARENT'

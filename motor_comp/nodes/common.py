@@ -52,6 +52,7 @@ from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 
 from motor_comp.errors import MotorCompError, ParameterError
+from motor_comp.nodes import PARENT_ENV
 
 #: default namespace of the axis topics (DESIGN.md §5); override with ``-r __ns:=/x``
 DEFAULT_NAMESPACE = 'axis'
@@ -788,6 +789,13 @@ class _Stop:
         self.event.set()
 
 
+def _parent_to_watch() -> int | None:
+    try:
+        return int(os.environ[PARENT_ENV])
+    except (KeyError, ValueError):
+        return None
+
+
 #: how often the spin loop lets rclpy's executor serve the non-hot entities (parameter
 #: services, lifecycle services, start-up timers): their response time [ns]
 EXECUTOR_PERIOD_NS = 50_000_000
@@ -844,6 +852,7 @@ def run_node(factory: Callable[[], ParamNode], argv: Iterable[str] | None = None
         gc.freeze()
         lean = LeanLoop(node)
         last = 0.0
+        parent = _parent_to_watch()
         profile = _profiler(node)
         while not stop.event.is_set() and not node.done:
             if lean.empty:   # inactive managed node: only services and timers to serve
@@ -868,6 +877,10 @@ def run_node(factory: Callable[[], ParamNode], argv: Iterable[str] | None = None
             if now - last > EXECUTOR_PERIOD_NS * 1e-9:
                 executor.spin_once(timeout_sec=0.0)
                 last = now
+                if parent is not None and os.getppid() != parent:
+                    node.get_logger().warning(f'the process that started this node '
+                                              f'({parent}) is gone: stopping')
+                    stop.event.set()
         clean = True
         if profile is not None:
             profile.disable()

@@ -71,3 +71,56 @@ def test_stale_timeout_takes_effect_at_run_time(controller) -> None:
     assert node.set_parameters([Parameter('stale_timeout', value=1.0)])[0].successful
     assert node._watchdog_timer.timer_period_ns == 50_000_000
     assert _zero_latency(node, executor, 0.6) is None
+
+
+@pytest.mark.timeout(120)
+def test_node_stops_when_the_process_that_started_it_is_killed(tmp_path, ros_env):
+    """A killed test run or CLI leaves no node behind (``PARENT_ENV``, set by NodeGroup).
+
+    A starter process starts a plant node (it waits for peers that never come) and is
+    SIGKILLed; the node notices it was re-parented and stops cleanly.  Waits are on
+    conditions: the node's log line, then its exit.
+    """
+    import os
+    import signal
+    import subprocess
+    import sys
+    import textwrap
+
+    starter = textwrap.dedent(f'''
+        import sys, time
+        from pathlib import Path
+        from motor_comp.cli.run import NodeGroup
+        group = NodeGroup(Path({str(tmp_path)!r}), dict(__import__('os').environ))
+        proc = group.start('plant_node')
+        print(proc.popen.pid, flush=True)
+        time.sleep(600)
+    ''')
+    parent = subprocess.Popen([sys.executable, '-c', starter], env=ros_env,
+                              stdout=subprocess.PIPE, text=True)
+    pid = int(parent.stdout.readline())
+    log = tmp_path / 'plant_node.log'
+    deadline = time.monotonic() + 60
+    while 'lifecycle: activate done' not in (log.read_text() if log.exists() else ''):
+        assert time.monotonic() < deadline, 'plant_node did not come up'
+        time.sleep(0.05)
+    parent.kill()
+    parent.wait()
+    deadline = time.monotonic() + 60
+    try:
+        while True:
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                break           # gone: the node stopped by itself
+            with open(f'/proc/{pid}/stat') as f:
+                if f.read().split(')')[-1].split()[0] == 'Z':
+                    break       # exited; a zombie until its new parent reaps it
+            assert time.monotonic() < deadline, 'the orphaned node kept running'
+            time.sleep(0.05)
+    finally:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    assert 'is gone: stopping' in log.read_text()
