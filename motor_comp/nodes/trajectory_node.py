@@ -11,13 +11,14 @@ keeps the ROS loop numerically identical to the simulator.
 Lockstep: one reference per control tick, stamped with its time, published ahead of the
 plant: on a ``/clock`` tick k (the plant publishes one every ``clock_every`` ticks) every
 reference up to tick k + ``lookahead`` not yet sent (from tick k itself when the clock
-restarts or repeats a tick).  The reference is a known
-function of time, so this takes the node off the loop's critical path, and it may take
-the ticks in batches (``batch_period``) instead of waking for each one: on two cores its
-wake-ups took CPU from the plant and the controller.  A parameter change therefore
-reaches the loop within ``lookahead`` ticks.  Realtime: a
-wall-clock timer at ``control_rate``; trajectory time starts at the stamp t0 of the
-plant's first measurement (the start point r(0), stamped with the wall clock, is held
+restarts or repeats a tick).  The reference is a known function of time, so this takes
+the node off the loop's critical path, and it may take the ticks in batches
+(``batch_period``) instead of waking for each one: on two cores its wake-ups took CPU
+from the plant and the controller.  A parameter change therefore reaches the loop within
+``lookahead`` ticks.
+
+Realtime: a wall-clock timer at ``control_rate``; trajectory time starts at the stamp t0
+of the plant's first measurement (the start point r(0), stamped with the wall clock, is held
 until then).  From then on each tick publishes the reference of the plant's sample grid
 ``t0 + k·T`` one period ahead (every grid point not yet published up to
 ``⌊(now − t0)/T⌋ + 1``, at most ``CATCH_UP`` missed ones after a stall), stamped with
