@@ -796,6 +796,15 @@ def _parent_to_watch() -> int | None:
         return None
 
 
+def _orphaned(node: Node, parent: int | None) -> bool:
+    """Whether the process that started this node (``PARENT_ENV``) is gone."""
+    if parent is None or os.getppid() == parent:
+        return False
+    node.get_logger().warning(f'the process that started this node ({parent}) is gone: '
+                              'stopping')
+    return True
+
+
 #: how often the spin loop lets rclpy's executor serve the non-hot entities (parameter
 #: services, lifecycle services, start-up timers): their response time [ns]
 EXECUTOR_PERIOD_NS = 50_000_000
@@ -857,6 +866,8 @@ def run_node(factory: Callable[[], ParamNode], argv: Iterable[str] | None = None
         while not stop.event.is_set() and not node.done:
             if lean.empty:   # inactive managed node: only services and timers to serve
                 executor.spin_once(timeout_sec=0.005)
+                if _orphaned(node, parent):
+                    stop.event.set()
                 continue
             ran = lean.spin_once(EXECUTOR_PERIOD_NS)
             if ran:
@@ -877,9 +888,7 @@ def run_node(factory: Callable[[], ParamNode], argv: Iterable[str] | None = None
             if now - last > EXECUTOR_PERIOD_NS * 1e-9:
                 executor.spin_once(timeout_sec=0.0)
                 last = now
-                if parent is not None and os.getppid() != parent:
-                    node.get_logger().warning(f'the process that started this node '
-                                              f'({parent}) is gone: stopping')
+                if _orphaned(node, parent):
                     stop.event.set()
         clean = True
         if profile is not None:

@@ -74,12 +74,15 @@ def test_stale_timeout_takes_effect_at_run_time(controller) -> None:
 
 
 @pytest.mark.timeout(120)
-def test_node_stops_when_the_process_that_started_it_is_killed(tmp_path, ros_env):
+@pytest.mark.parametrize('autostart', [True, False], ids=['active', 'unconfigured'])
+def test_node_stops_when_the_process_that_started_it_is_killed(tmp_path, ros_env,
+                                                               autostart):
     """A killed test run or CLI leaves no node behind (``PARENT_ENV``, set by NodeGroup).
 
-    A starter process starts a plant node (it waits for peers that never come) and is
-    SIGKILLed; the node notices it was re-parented and stops cleanly.  Waits are on
-    conditions: the node's log line, then its exit.
+    A starter process starts a plant node (it waits for peers that never come, or, with
+    ``autostart`` false, for lifecycle transitions that never come) and is SIGKILLed;
+    the node notices it was re-parented and stops cleanly.  Waits are on conditions:
+    the node's log line, then its exit.
     """
     import os
     import signal
@@ -87,12 +90,15 @@ def test_node_stops_when_the_process_that_started_it_is_killed(tmp_path, ros_env
     import sys
     import textwrap
 
+    extra = [] if autostart else ['-p', 'autostart:=false']
+    ready = ('lifecycle: activate done' if autostart
+             else 'waiting for lifecycle transitions')
     starter = textwrap.dedent(f'''
         import sys, time
         from pathlib import Path
         from motor_comp.cli.run import NodeGroup
         group = NodeGroup(Path({str(tmp_path)!r}), dict(__import__('os').environ))
-        proc = group.start('plant_node')
+        proc = group.start('plant_node', extra={extra!r})
         print(proc.popen.pid, flush=True)
         time.sleep(600)
     ''')
@@ -101,7 +107,7 @@ def test_node_stops_when_the_process_that_started_it_is_killed(tmp_path, ros_env
     pid = int(parent.stdout.readline())
     log = tmp_path / 'plant_node.log'
     deadline = time.monotonic() + 60
-    while 'lifecycle: activate done' not in (log.read_text() if log.exists() else ''):
+    while ready not in (log.read_text() if log.exists() else ''):
         assert time.monotonic() < deadline, 'plant_node did not come up'
         time.sleep(0.05)
     parent.kill()
