@@ -19,6 +19,7 @@ interleaved hv-block folds of :class:`~motor_comp.workbench.ident.Data`.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any, Callable, Sequence
 
 from motor_comp.threads import single_threaded_blas
@@ -146,13 +147,20 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
         eta = None if name in idm.LINEAR else idm.best_eta(
             eng.D, est.spec.with_(name, _seed_eta(eng, est, name)), name, est.model)
         est = idm.estimate(eng.D, est.spec.with_(name, eta), est.model)
+        # the nonlinear parameters of the effects added before were chosen without this
+        # one (a ripple period picked before the offset was in): choose them again
+        est = _research(eng, est, name)
         text = f'added {name}: {_params_text(est, name, u)}'
         steps.append(FitStep(name, est.nrmse_cv, est.model, text, 'add'))
         say(f'{text}; force NRMSE {100 * est.nrmse_cv:.1f} %')
     if auto:
         est = _select(eng, est, steps, say, max_steps)
     exp = experiment_notes(eng.D, model)
-    unc = {g: {k: float(v) for k, v in d.items()} for g, d in est.se.items()}
+    # the standard errors with the processing's share: how far each parameter moves
+    # with a smoother twice as long (idm.processing_spread)
+    spread = idm.processing_spread(eng.D, est.spec, est.model)
+    unc = {g: {k: float(math.hypot(v, spread.get(g, {}).get(k, 0.0))) for k, v in d.items()}
+           for g, d in est.se.items()}
     final = est.model
     s = common_scale(model, est)
     if s is not None and set(final.names) >= set(model.names):

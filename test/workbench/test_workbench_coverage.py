@@ -10,13 +10,16 @@ and a mass off by 2×), so this measures the uncertainty of the estimates, not t
 choice of effects (the independent suite judges that).  A parameter reported "at its
 bound" has no standard error and counts as a miss.
 
-Measured (2026-11-23, stretch-jackknife SEs, the backlash reconstruction fixed, one
-process, ~40 s): mass 119/150, coulomb.fc 116/150, viscous.fv 120/150, ripple.period
-26/30, ripple.amplitude_1 24/30, delay.tau 24/30, backlash.width 22/30, gravity.mgl and q0
-25/30, presliding.stiffness 19/30; the rest >= 28/30.  What is left is bias, not SE: the
-``--add`` path keeps nonlinear parameters chosen before the later effects were in, the
-GMS slip rate comes out low, and the filter/input kernels leave 0.05–0.3 % biases that
-the SEs of these nearly noise-free runs are smaller than.
+Measured (2026-11-23 evening, one process, ~60 s): with the stretch-jackknife SEs
+plus the processing spread ``fit`` adds (``ident.processing_spread``), the nonlinear
+parameters re-searched after each ``--add``, the ripple columns matched to the
+acceleration stencil and free GMS element distances: coulomb.fc 150/150, viscous.fv
+142/150, spring, gravity, offset, asymmetry, stribeck and ripple 28–30/30 each; short
+of the bar: mass 120/150 (the ripple and pre-sliding families: errors of −0.04 …
+−0.35 % where the SE is a few 0.01 %), delay.tau 16/30 (−10 … −25 µs at 1 kHz,
+a sub-sample bias), backlash.width 22/30 and presliding.stiffness 18/30 (at 1 kHz the
+stiffest element's distance is at the encoder's resolution: Σk is dominated by it).
+Before the processing spread (same code otherwise): fc 81 %, fv 75 %, mass 73 %.
 """
 from __future__ import annotations
 
@@ -139,11 +142,54 @@ def test_every_effect_has_at_least_30_runs(samples):
 
 @pytest.mark.xfail(strict=True, reason=(
     'issue 11 coverage bar not met yet (open): with the effect set given, ±2 SE holds the '
-    'truth for mass 119/150, coulomb.fc 116/150, viscous.fv 120/150, backlash.width 22/30, '
-    'presliding.stiffness 19/30, delay.tau 24/30 — what is left is bias of the fit '
-    '(stale nonlinear parameters on --add, GMS slip rate, filter kernels)'))
+    'truth for mass 120/150, delay.tau 16/30, backlash.width 22/30, presliding.stiffness '
+    '18/30 (every other parameter >= 28/30, fc 150/150, fv 142/150) — what is left is '
+    'bias of the fit: a sub-sample dead-time bias, GMS stiffness at the encoder '
+    'resolution, mass biases of a few 0.1 %'))
 def test_truth_within_two_standard_errors_in_90_percent(samples):
     """Reported SEs are honest: ≥ 90 % coverage of ±2 SE for every judged parameter."""
     cov = coverage(samples)
     bad = {f'{n}.{k}': f'{h}/{m}' for (n, k), (h, m) in cov.items() if h < COVERAGE * m}
     assert not bad, ', '.join(f'{n}.{k} {h}/{m}' for (n, k), (h, m) in cov.items())
+
+
+#: the parameters short of the bar today (the xfail above says why)
+SHORT_OF_THE_BAR = {('mass', 'mass'), ('delay', 'tau'), ('backlash', 'width'),
+                    ('presliding', 'stiffness')}
+
+
+def test_every_other_parameter_meets_the_bar(samples):
+    """Every judged parameter not in :data:`SHORT_OF_THE_BAR` holds ±2 SE in ≥ 90 %.
+
+    Measured 2026-11-23: fc 150/150, fv 142/150, the rest 28–30 of 30.  Without the
+    processing spread fc and fv fall to 81 % and 75 % (this test then fails).
+    """
+    cov = coverage(samples)
+    bad = {f'{n}.{k}': f'{h}/{m}' for (n, k), (h, m) in cov.items()
+           if (n, k) not in SHORT_OF_THE_BAR and h < COVERAGE * m}
+    assert not bad, bad
+
+
+def test_the_processing_spread_enters_the_reported_uncertainty():
+    """``fit`` reports √(SE² + spread²); the spread is finite, ≥ 0, and not all zero."""
+    from motor_comp.workbench import fit, ident, kinematics
+    from motor_comp.workbench.session import default_hold
+    from test_workbench_independent import as_model
+    case = FAMILIES['gravity']
+    rig, truth = case.draw(0)
+    gen = generate(truth, rig, excitation=case.excitation, duration=DURATION, seed=0)
+    start = as_model(case.start(truth))
+    kin = kinematics(gen.run, hold=default_hold(start))
+    res = fit(kin, start, add=list(truth['effects']))
+    D = ident.Data([kin], res.model)
+    spec = ident.spec_of(res.model)
+    est = ident.estimate(D, spec, res.model)
+    spread = ident.processing_spread(D, spec, res.model)
+    vals = [v for d in spread.values() for v in d.values()]
+    assert vals and all(math.isfinite(v) and v >= 0 for v in vals)
+    assert spread['coulomb']['fc'] > 0 and spread['mass']['mass'] > 0
+    for g, d in est.se.items():
+        for k, se in d.items():
+            if math.isfinite(se) and k in spread.get(g, {}):
+                want = math.hypot(se, spread[g][k])
+                assert res.uncertainty[g][k] == pytest.approx(want, rel=0.05), (g, k)
