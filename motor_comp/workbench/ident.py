@@ -313,6 +313,16 @@ class Data:
         g = self.stencil_gain(w)
         return both[:, :nh] * g, both[:, nh:] * g
 
+    def stencil_gain_cached(self, w: float) -> np.ndarray:
+        """:meth:`stencil_gain` of one spatial frequency, cached with the columns."""
+        k = self.key(('stencil_gain', float(w)))
+        hit = self._cache.get(k)
+        if hit is None:
+            if len(self._cache) > self._cache_max:
+                self._cache.clear()
+            hit = self._cache[k] = np.ascontiguousarray(self.stencil_gain(w)[:, 0])
+        return hit
+
     def stencil_gain(self, w: np.ndarray) -> np.ndarray:
         """What the acceleration stencil makes of a force ``sin(w·x)``, at the rows.
 
@@ -990,7 +1000,7 @@ def keyed_columns(D: Data, spec: Spec) \
         period, nh = spec.eta['ripple']
         for h in range(1, int(nh) + 1):
             w = 2 * math.pi * h / period
-            g = D.stencil_gain(w)[:, 0]
+            g = D.stencil_gain_cached(w)
             add('ripple', f'a{h}', sg(lambda p, w=w: np.sin(w * p.x), ('sin', w)) * g,
                 D.key(('sin_stencil', w)))
             add('ripple', f'b{h}', sg(lambda p, w=w: np.cos(w * p.x), ('cos', w)) * g,
