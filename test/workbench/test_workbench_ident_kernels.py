@@ -57,7 +57,7 @@ def test_gms_columns_in_one_pass_equal_one_element_at_a_time(data):
     dists = (2e-6, 7e-6, 3e-5)
     many = ident.gms_columns(p, dists, 800.0, 0.4, 3e-3, 1.3)
     for j, d in enumerate(dists):
-        one = gms_trajectory(np.ascontiguousarray(p.x), np.ones(1), np.array([1.0 / d]),
+        one = gms_trajectory(np.ascontiguousarray(p.xg), np.ones(1), np.array([1.0 / d]),
                              np.zeros(1), 800.0, 1.0, 1.4, 3e-3, 1.3, p.kin.dt)
         assert np.max(np.abs(many[:, j] - one)) == 0.0
 
