@@ -302,12 +302,28 @@ def _research(eng: Engine, est: idm.Estimate, just: str) -> idm.Estimate:
 CONSTANT_CARRIERS = ('spring',)
 
 
+def _flat_asymmetry(est: idm.Estimate) -> bool:
+    """Whether the asymmetry's speed-dependent part is within 2 SE of zero.
+
+    While the axis slides, ``dfc`` is a constant like an offset; only ``dfv`` (the
+    direction-dependent viscous term) is the asymmetry's own.  When the run does not
+    support it, the asymmetry is tried as an offset in backward elimination too (an
+    asymmetry added before gravity had stood in for the load's constant torque).  On
+    the HSM150 runs |dfv| > 2 SE, so that real asymmetry is not offered the swap.
+    """
+    dfv = est.scalars.get('asymmetry', {}).get('dfv')
+    se = est.se.get('asymmetry', {}).get('dfv')
+    if dfv is None or se is None or not math.isfinite(se):
+        return False
+    return abs(dfv) < 2.0 * se
+
+
 def _backward(eng: Engine, est: idm.Estimate, just: str, steps: list,
               say: Callable[[str], None], removed_once: set) -> idm.Estimate:
     """Drop effects whose removal no longer hurts (once each), worst first.
 
-    An effect that carries the constant force (:data:`CONSTANT_CARRIERS`) is also tried
-    as an offset: a spring added early for a constant force (or for gravity, before the
+    An effect that carries the constant force (:data:`CONSTANT_CARRIERS`, or an
+    asymmetry whose ``dfv`` the run does not support) is also tried as an offset: a spring added early for a constant force (or for gravity, before the
     ``gravity`` term was in) is replaced by the offset once its slope no longer pays.
     """
     while True:
@@ -318,7 +334,8 @@ def _backward(eng: Engine, est: idm.Estimate, just: str, steps: list,
             if n == 'coulomb' and ({'stribeck', 'presliding'} & set(est.spec.names)):
                 continue
             trials = [est.spec.without(n)]
-            if n in CONSTANT_CARRIERS and 'offset' not in est.spec.names:
+            carrier = n in CONSTANT_CARRIERS or (n == 'asymmetry' and _flat_asymmetry(est))
+            if carrier and 'offset' not in est.spec.names:
                 trials.append(est.spec.without(n).with_('offset'))
             for spec in trials:
                 idm.sync(eng.D, spec, est.model)
