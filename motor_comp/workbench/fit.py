@@ -323,8 +323,9 @@ def _backward(eng: Engine, est: idm.Estimate, just: str, steps: list,
     """Drop effects whose removal no longer hurts (once each), worst first.
 
     An effect that carries the constant force (:data:`CONSTANT_CARRIERS`, or an
-    asymmetry whose ``dfv`` the run does not support) is also tried as an offset: a spring added early for a constant force (or for gravity, before the
-    ``gravity`` term was in) is replaced by the offset once its slope no longer pays.
+    asymmetry whose ``dfv`` the run does not support) is also tried as an offset: a
+    spring added early for a constant force (or for gravity, before the ``gravity``
+    term was in) is replaced by the offset once its slope no longer pays.
     """
     while True:
         worst = None

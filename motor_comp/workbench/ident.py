@@ -326,7 +326,7 @@ class Data:
         return hit
 
     def stencil_gain(self, w: np.ndarray) -> np.ndarray:
-        """What the acceleration stencil makes of a force ``sin(w·x)``, at the rows.
+        """Return the gain the acceleration stencil applies to ``sin(w·x)``, at the rows.
 
         The 3-point second difference of the position is the acceleration averaged
         with a triangle of ±1 sample (:func:`_stencil`), so a force that varies with
