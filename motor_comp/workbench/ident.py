@@ -577,8 +577,13 @@ def _gms_position(kin: Kinematics, x: np.ndarray) -> np.ndarray:
     the encoder noise.
     """
     from scipy.ndimage import correlate1d
-    w = max(5, (kin.window // 3) | 1)
-    return correlate1d(np.asarray(x, dtype=float), _coeffs(w, 2, 0), mode='mirror')
+    return correlate1d(np.asarray(x, dtype=float), _coeffs(_short_window(kin), 2, 0),
+                       mode='mirror')
+
+
+def _short_window(kin: Kinematics) -> int:
+    """Savitzky–Golay window of the pointwise laws: a third of the derivative's."""
+    return max(5, (kin.window // 3) | 1)
 
 
 def _point_velocity(kin: Kinematics, x: np.ndarray) -> np.ndarray:
@@ -590,7 +595,7 @@ def _point_velocity(kin: Kinematics, x: np.ndarray) -> np.ndarray:
     derivative shifted the Coulomb switching enough to bias a dead time by +1.2 ms.
     """
     from scipy.ndimage import correlate1d
-    w = max(5, (kin.window // 3) | 1)
+    w = _short_window(kin)
     x = np.asarray(x, dtype=float)
     v = correlate1d(x, _coeffs(w, 2, 1), mode='mirror') / kin.dt
     # remember the raw position: the reversal instants are located on it (a backlash
