@@ -224,14 +224,22 @@ class NodeGroup:
             time.sleep(0.05)
 
     def stop(self, node: str, *, sig: int = signal.SIGINT, timeout: float = 10.0) -> int:
-        """Signal ``node`` and wait for it to exit (SIGKILL after ``timeout``)."""
+        """Signal ``node`` and wait for it to exit (SIGABRT, then SIGKILL after ``timeout``).
+
+        SIGABRT first: the node's fault handler writes every thread's stack to its log,
+        so a stop that hangs says where.
+        """
         popen = self.procs[node].popen
         if popen.poll() is None:
             try:
                 popen.send_signal(sig)
                 return popen.wait(timeout)
             except subprocess.TimeoutExpired:
-                popen.kill()
+                popen.send_signal(signal.SIGABRT)
+                try:
+                    return popen.wait(5.0)
+                except subprocess.TimeoutExpired:
+                    popen.kill()
         return popen.wait()
 
     def stop_all(self, order: Sequence[str] | None = None) -> dict[str, int]:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import faulthandler
 import gc
 import math
 import os
@@ -847,6 +848,9 @@ def run_node(factory: Callable[[], ParamNode], argv: Iterable[str] | None = None
         return 2
     signal.signal(signal.SIGINT, stop)
     signal.signal(signal.SIGTERM, stop)
+    # a stop that hangs is diagnosable: NodeGroup.stop sends SIGABRT before SIGKILL,
+    # and this prints every thread's Python stack to the node's log first
+    faulthandler.enable()
     node = None
     executor = None
     clean = False
@@ -891,6 +895,9 @@ def run_node(factory: Callable[[], ParamNode], argv: Iterable[str] | None = None
                 if _orphaned(node, parent):
                     stop.event.set()
         clean = True
+        why = (signal.Signals(stop.signal).name if stop.signal
+               else 'parent gone' if stop.event.is_set() else 'done')
+        node.get_logger().info(f'stopping ({why})')
         if profile is not None:
             profile.disable()
             try:
