@@ -104,31 +104,32 @@ class Kinematics:
     def input_at(self, tau: float = 0.0) -> np.ndarray:
         """Input seen by the axis at each sample, delayed by ``tau`` [s].
 
-        For a zero-order-hold command the value is the hold signal averaged over
-        ``[t − τ − dt/2, t − τ + dt/2]`` (exact, from its running integral): this is what
-        the centred acceleration estimate at ``t`` responds to, so a correct model leaves
-        no spurious half-sample delay in the residual.  A sampled input is interpolated.
+        For a zero-order-hold command the value is the hold signal delayed by ``τ`` and
+        averaged with the triangular weight over ``[t − dt, t + dt]``: exactly what the
+        3-point second difference of the position at ``t`` responds to (the double
+        integral of the force, differenced), so a correct model leaves no spurious
+        half-sample delay in the residual — and no bias of a fractional delay either: a
+        box average over one step, which equals this only at whole-sample delays,
+        put the fitted τ 10–25 µs short of the truth at 1 kHz.  With ``τ = (n + f)·dt``
+        the weights of ``u[k−n−2]``, ``u[k−n−1]``, ``u[k−n]`` are ``f²/2``,
+        ``1 − f²/2 − (1 − f)²/2`` and ``(1 − f)²/2``.  A sampled input is interpolated.
         """
         t, u = self.t, self.u
         if self.hold is InputHold.SAMPLE:
             return np.interp(t - tau, t, u)
-        cum, tk = self._hold_integral
-        half = 0.5 * self.dt
-
-        def integral(s: np.ndarray) -> np.ndarray:
-            before = s < t[0]
-            out = np.interp(s, tk, cum)
-            out[before] = (s[before] - t[0]) * u[0]
-            return out
-
-        return (integral(t - tau + half) - integral(t - tau - half)) / self.dt
-
-    @functools.cached_property
-    def _hold_integral(self) -> tuple[np.ndarray, np.ndarray]:
-        # running integral of the hold signal at the stamps (and one step after the
-        # last): the same for every delay, and a delay search asks for hundreds
-        cum = np.concatenate([[0.0], np.cumsum(self.u) * self.dt])
-        return cum, np.concatenate([self.t, [self.t[-1] + self.dt]])
+        q = float(tau) / self.dt
+        n = int(np.floor(q))
+        f = q - n
+        if f > 1.0 - 1e-12:   # a whole sample, up to rounding
+            n, f = n + 1, 0.0
+        k = np.arange(len(u))
+        # before the first sample the command is held at u[0], after the last at u[-1]
+        last = len(u) - 1
+        out = (1.0 - 0.5 * f * f - 0.5 * (1.0 - f) ** 2) * u[np.clip(k - n - 1, 0, last)]
+        out += 0.5 * (1.0 - f) ** 2 * u[np.clip(k - n, 0, last)]
+        if f > 0.0:
+            out += 0.5 * f * f * u[np.clip(k - n - 2, 0, last)]
+        return out
 
     def noise_std(self) -> float:
         """Robust estimate of the position measurement noise [m] (raw minus smoothed)."""

@@ -53,8 +53,44 @@ def test_zoh_input_is_centred_and_delayed_exactly():
     np.testing.assert_allclose(c[k - 1:k + 2], [0.0, 0.5, 1.0], atol=1e-9)
     d = kin.input_at(2 * DT)
     np.testing.assert_allclose(d[k + 1:k + 4], [0.0, 0.5, 1.0], atol=1e-9)
-    q = kin.input_at(0.25 * DT)   # a quarter step: a quarter of the step is seen
-    np.testing.assert_allclose(q[k:k + 2], [0.25, 1.0], atol=1e-9)
+    # a quarter step: the 3-point second difference at sample k sees the step through
+    # the triangle over [t_k-1, t_k+1]: (1 - 1/4)²/2 of it, at k + 1 all but (1/4)²/2
+    q = kin.input_at(0.25 * DT)
+    np.testing.assert_allclose(q[k:k + 2], [0.28125, 0.96875], atol=1e-9)
+
+
+@pytest.mark.parametrize('frac', [0.0, 0.1, 0.25, 0.5, 0.77, 1.0, 2.4, 7.93])
+def test_zoh_input_matches_the_second_difference_of_the_motion(frac):
+    """``input_at(τ)`` is what the 3-point second difference of the motion sees.
+
+    A unit mass driven by the held command delayed by τ: its position at the samples
+    is the double integral of the command, evaluated here piece by piece (exact
+    parabolas between the delayed hold edges), independently of the implementation.
+    """
+    rng = np.random.default_rng(7)
+    n = 400
+    t = np.arange(n) * DT
+    u = rng.normal(0.0, 1.0, n)
+    tau = frac * DT
+    kin = kinematics(Run(t=t, position=np.sin(t), voltage=u))
+
+    def position(s: float) -> float:
+        # ∫∫ of u held on [t_j + τ, t_j+1 + τ) (u[0] before, u[-1] after), from 0 at t=-1
+        edges = np.concatenate([[-1.0], t[1:] + tau, [np.inf]])
+        vals = u
+        x = v = 0.0
+        for j in range(n):
+            a, b = edges[j], min(edges[j + 1], s)
+            if b <= a:
+                break
+            h = b - a
+            x += v * h + 0.5 * vals[j] * h * h
+            v += vals[j] * h
+        return x
+
+    xs = np.array([position(s) for s in t])
+    seen = (xs[2:] - 2 * xs[1:-1] + xs[:-2]) / DT ** 2
+    np.testing.assert_allclose(kin.input_at(tau)[1:-1], seen, atol=1e-6)
 
 
 def test_irregular_sampling_is_resampled():
