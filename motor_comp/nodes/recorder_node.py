@@ -310,9 +310,25 @@ class RecorderNode(ManagedNode):
         self._segment = 0
 
     def _params_pending(self) -> list[str]:
-        """Nodes that are up (their parameter services answer) but not yet recorded."""
+        """Nodes that are up but whose parameters are not recorded yet.
+
+        Up: its parameter services answer, or it publishes one of the recorded topics.
+        The second matters: DDS discovers a node's topics and its services' endpoints
+        separately, and a plant seen on ``/clock`` whose services were not discovered
+        yet was not waited for — its 1.5 s lockstep run ended (and the node with it)
+        before the recorder asked (a stress run lost ``params:plant_node`` this way).
+        A publisher whose node name is not known yet counts as every node not yet
+        recorded.
+        """
+        up: set[str] = set()
+        for topic in self.topics.values():
+            for info in self.get_publishers_info_by_topic(topic):
+                if info.node_name.startswith('_NODE_NAME_UNKNOWN_'):
+                    up.update(self._param_clients)
+                else:
+                    up.add(info.node_name)
         return [n for n, c in self._param_clients.items()
-                if n not in self._raw_params and c.services_are_ready()]
+                if n not in self._raw_params and (n in up or c.services_are_ready())]
 
     def _subscribe_joint_states(self) -> None:
         # also wait until the running nodes' parameters are stored: the plant starts
