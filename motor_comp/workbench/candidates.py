@@ -476,10 +476,8 @@ def fit_backlash(ctx: FitContext, train: np.ndarray,
 
     span = float(np.ptp(kin.x))
     hi = min(MAX_BACKLASH, 0.05 * span)
-    # a gap of a few encoder counts cannot be told from quantisation and stiction
-    steps = np.abs(np.diff(kin.position))
-    quantum = float(np.min(steps[steps > 0], initial=0.0))
-    lo = max(1e-7, 5.0 * quantum, 10.0 * kin.noise_std())
+    # from ten noise σ (what the joint fit's gap search uses, ``ident.backlash_grid``)
+    lo = max(1e-7, 10.0 * kin.noise_std())
     hi = min(max(hi, 4 * lo), MAX_BACKLASH)
     lo = min(lo, 0.25 * hi)
     if start is not None:

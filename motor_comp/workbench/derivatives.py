@@ -131,6 +131,20 @@ class Kinematics:
             out += 0.5 * f * f * u[np.clip(k - n - 2, 0, last)]
         return out
 
+    def quantum(self) -> float:
+        """Smallest nonzero step of the measured position [m]: the encoder resolution.
+
+        0 for a position that never moves.  (``np.min(..., initial=0)`` would return the
+        ``initial`` value itself: it joins the minimum, it is not a default.)
+        """
+        return self._quantum
+
+    @functools.cached_property
+    def _quantum(self) -> float:
+        steps = np.abs(np.diff(self.position))
+        nz = steps[steps > 0]
+        return float(nz.min()) if nz.size else 0.0
+
     def noise_std(self) -> float:
         """Robust estimate of the position measurement noise [m] (raw minus smoothed)."""
         return self._noise_std

@@ -75,11 +75,15 @@ NEED_BOTH_DIRECTIONS = ('offset', 'asymmetry')
 #: the nonlinear parameter that sets each effect's shape: an effect whose force share is
 #: small (a backlash gap, a dead time) still pays when it removes most of what the model
 #: leaves and this parameter is pinned down by the run (see :meth:`Engine.resolved`)
-SHAPE_PARAM = {'delay': 'tau', 'backlash': 'width'}
+SHAPE_PARAM = {'delay': 'tau', 'backlash': 'width', 'presliding': 'stiffness'}
 #: "most of what the model leaves": least held-out share of the residual removed
 RESOLVED_GAIN = 0.5
-#: "pinned down": largest standard error of the shape parameter relative to its value
-RESOLVED_REL_SE = 0.05
+#: "pinned down": largest standard error of the shape parameter relative to its value.
+#: A GMS's initial stiffness Σk is set by the first encoder counts after each reversal,
+#: so it is looser than a delay or a gap (0.19 on the independent generator's
+#: c+presliding+ripple seed 3, whose pre-sliding is half of what a Coulomb + ripple
+#: model leaves); a GMS fitted to a stick from a different law has no stiffness at all
+RESOLVED_REL_SE = {'delay': 0.05, 'backlash': 0.05, 'presliding': 0.25}
 
 
 LINEAR_UNITS = Units.of(AxisKind.LINEAR)
@@ -587,11 +591,29 @@ class Engine:
         key = SHAPE_PARAM.get(name)
         if key is None or not (explained >= max(RESOLVED_GAIN, self.min_gain) and bic < 0):
             return False
+        if name == 'presliding' and not self._presliding_resolved(est):
+            return False
         val = est.scalars.get(name, {}).get(key)
         se = est.se.get(name, {}).get(key)
         if val is None or se is None or not (np.isfinite(se) and se > 0 and val != 0):
             return False
-        return bool(se <= RESOLVED_REL_SE * abs(val))
+        return bool(se <= RESOLVED_REL_SE[name] * abs(val))
+
+    def _presliding_resolved(self, est: idm.Estimate) -> bool:
+        """Whether the run's samples see the fitted pre-sliding curve being travelled.
+
+        Leaving a reversal at the run's acceleration ``a`` (90th percentile), the axis
+        covers ``½·a·(2·dt)²`` in two samples.  A GMS whose longest element distance is
+        shorter is crossed within the first sample or two: no sample lies on its curve,
+        and what it fits is how a stick ends between samples (on the independent
+        generator's 100 Hz rotary runs, a set-valued stick fitted as a 1.4e-4 rad GMS).
+        """
+        dists = est.spec.eta.get('presliding', ((),))[0]
+        if not dists:
+            return False
+        dt = max(k.dt for k in self.D.kins)
+        a = float(np.percentile(np.abs(self.D.al()), 90))
+        return bool(max(dists) >= 2.0 * a * dt * dt)
 
     def h0(self, model: AxisModel) -> idm.Estimate:
         """Refit the model's own effects, every parameter (nonlinear ones re-searched)."""

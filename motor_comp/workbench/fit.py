@@ -156,10 +156,13 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
     if auto:
         est = _select(eng, est, steps, say, max_steps)
     exp = experiment_notes(eng.D, model)
-    # the standard errors with the processing's share: how far each parameter moves
-    # with a smoother twice as long (idm.processing_spread)
-    spread = idm.processing_spread(eng.D, est.spec, est.model)
-    unc = {g: {k: float(math.hypot(v, spread.get(g, {}).get(k, 0.0))) for k, v in d.items()}
+    # the standard errors with the processing's and the measurement's share: how far
+    # each parameter moves with a smoother twice as long (idm.processing_spread) and
+    # with the position measured again (idm.measurement_spread)
+    spreads = (idm.processing_spread(eng.D, est.spec, est.model),
+               idm.measurement_spread(eng.D, est.spec, est.model))
+    unc = {g: {k: float(math.hypot(v, *(s.get(g, {}).get(k, 0.0) for s in spreads)))
+               for k, v in d.items()}
            for g, d in est.se.items()}
     final = est.model
     s = common_scale(model, est)

@@ -66,6 +66,8 @@ MAX_BACKLASH = 0.01
 #: carries) is then linear and fitted jointly, so the element count and split are
 #: estimated, not assumed (unused distances get no weight)
 GMS_DISTANCES = (0.3, 1.0, 3.0)
+#: most GMS elements the structural search grows to (``_grow_gms``)
+GMS_MAX_ELEMENTS = 4
 #: contiguous stretches of the record the standard errors are jackknifed over (see
 #: ``_sandwich``): each a regime of a time-ordered experiment, still 7 degrees of freedom
 SE_CLUSTERS = 8
@@ -129,10 +131,15 @@ class Data:
     smoother_scale : float
         Length of the smoother ``S`` relative to :func:`smoother_length` (the
         processing-sensitivity term of the standard errors refits with 2).
+    masks : sequence of ndarray of bool, optional
+        The sliding samples of each run (``Data.masks`` of another experiment on the
+        same time grid), instead of finding them in ``kins``: the measurement term of
+        the standard errors refits the same samples of re-measured positions.
     """
 
     def __init__(self, kins: Sequence[Kinematics], model: AxisModel, *, folds: int = 5,
-                 block_s: float | None = None, smoother_scale: float = 1.0) -> None:
+                 block_s: float | None = None, smoother_scale: float = 1.0,
+                 masks: Sequence[np.ndarray] | None = None) -> None:
         if folds < 2:
             raise ParameterError(f'folds must be >= 2, got {folds}')
         self.kins = list(kins)
@@ -140,6 +147,8 @@ class Data:
         self.folds = int(folds)
         self.smoother_scale = float(smoother_scale)
         self.parts: list[_RunPart] = []
+        #: the sliding samples of each run (full rate, before decimation)
+        self.masks: list[np.ndarray] = []
         total = sum(k.duration for k in self.kins)
         if block_s is None:
             block_s = float(np.clip(total / (10.0 * folds), 0.25, 2.0))
@@ -150,9 +159,13 @@ class Data:
             W = smoother_length(kin)
             if smoother_scale != 1.0:
                 W = 2 * max(1, int(round(smoother_scale * (W // 2)))) + 1
-            mask = fit_rows_mask(kin, half=W // 2, min_stop=3)
-            mask[:W // 2 + 2] = False
-            mask[len(kin) - W // 2 - 2:] = False
+            if masks is None:
+                mask = fit_rows_mask(kin, half=W // 2, min_stop=3)
+                mask[:W // 2 + 2] = False
+                mask[len(kin) - W // 2 - 2:] = False
+            else:
+                mask = np.asarray(masks[i], dtype=bool)
+            self.masks.append(mask)
             step = max(1, W // 8)
             keep = np.zeros(len(kin), dtype=bool)
             keep[::step] = True
@@ -719,8 +732,7 @@ def _direction_shares(p: _RunPart) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     half = max(3, int(round(REVERSAL_HALF * p.kin.window)))
     eps = getattr(p, '_eps', None)
     if eps is None:             # the sensor's resolution: once per run
-        steps = np.abs(np.diff(p.kin.position))
-        eps = max(float(np.min(steps[steps > 0], initial=0.0)), p.kin.noise_std())
+        eps = max(p.kin.quantum(), p.kin.noise_std())
         p._eps = eps    # type: ignore[attr-defined]
     out = reversal_shares(np.asarray(raw, dtype=float), np.asarray(p.v, dtype=float),
                           half, eps, spread=p.kin.hold is not InputHold.SAMPLE)
@@ -1371,11 +1383,12 @@ def delay_grid(D: Data, max_tau: float = 0.03) -> np.ndarray:
 
 
 def backlash_grid(D: Data) -> np.ndarray:
-    """Trial gap widths: from a few encoder counts to 5 % of the travel (log-spaced)."""
+    """Trial gap widths: from ten times the position noise to 5 % of the travel (log-spaced)."""
     kin = D.kins[0]
-    steps = np.abs(np.diff(kin.position))
-    quantum = float(np.min(steps[steps > 0], initial=0.0))
-    lo = max(1e-7, 5.0 * quantum, 10.0 * kin.noise_std())
+    # ten noise σ, not a few counts: a gap search that starts at 5 counts (10 µm on
+    # a 2 µm encoder) sat on a coarser grid and missed a 39 µm gap of the independent
+    # suite (backlash seed 4); a gap too small to tell from stiction does not pay
+    lo = max(1e-7, 10.0 * kin.noise_std())
     hi = min(MAX_BACKLASH, 0.05 * float(np.ptp(kin.x)))
     hi = min(max(hi, 4 * lo), MAX_BACKLASH)
     lo = min(lo, 0.25 * hi)
@@ -1398,9 +1411,7 @@ def gms_grid(D: Data) -> list[tuple[float, float]]:
 def gms_min_scale(D: Data) -> float:
     """Return the smallest GMS distance scale searched [m]: 3 encoder counts (or noise)."""
     kin = D.kins[0]
-    steps = np.abs(np.diff(kin.position))
-    quantum = float(np.min(steps[steps > 0], initial=1e-9))
-    return max(3.0 * quantum, 3.0 * kin.noise_std(), 1e-9)
+    return max(3.0 * kin.quantum(), 3.0 * kin.noise_std(), 1e-9)
 
 
 def gms_eta(d0: float, c: float, ratio: float) -> tuple:
@@ -1515,6 +1526,34 @@ def best_eta(D: Data, spec: Spec, name: str, model: AxisModel,
         eta = gms_eta(float(np.exp(np.clip(opt.x[0], lo_d, 0.0))),
                       float(np.exp(np.clip(opt.x[1], 0.0, np.log(1e6)))), ratio)
         eta = _free_gms(D, spec, _prune_gms(D, spec, eta, rows), rows, costs[i])
+        eta = _grow_gms(D, spec, eta, rows, costs[i])
+    return eta
+
+
+def _grow_gms(D: Data, spec: Spec, eta: tuple, rows: np.ndarray, scale: float) -> tuple:
+    """Try a stiffer GMS element than any found; keep it when it pays (BIC).
+
+    The free search moves the distances it has but never adds one: from the family's
+    fit it can settle with two elements where the curve has three, the two stiffest
+    merged into one of medium distance (independent generator, coverage seeds 2 and
+    13: Σk 33 % low, the three-element curve's SSE 5× lower).  A new element at a third
+    of the shortest distance, the distances then searched freely again and pruned, is
+    accepted when the BIC (two parameters: its distance and level) improves; repeated
+    while it does, up to :data:`GMS_MAX_ELEMENTS`.
+    """
+    n_eff = max(D.n_eff * np.count_nonzero(rows) / D.n, 2.0)
+    sse = _vp_sse(D, spec.with_('presliding', eta), rows)
+    lo = gms_min_scale(D)
+    while len(eta[0]) < GMS_MAX_ELEMENTS and min(eta[0]) / 3.0 >= lo:
+        dists, c, ratio = eta
+        trial = _free_gms(D, spec, ((min(dists) / 3.0,) + tuple(dists), c, ratio), rows,
+                          scale)
+        s1 = _vp_sse(D, spec.with_('presliding', trial), rows)
+        k = len(trial[0]) - len(dists)
+        if k <= 0 or n_eff * math.log(max(s1, 1e-300) / max(sse, 1e-300)) \
+                + 2 * k * math.log(n_eff) >= 0:
+            break
+        eta, sse = trial, s1
     return eta
 
 
@@ -1744,8 +1783,13 @@ def _nl_params(spec: Spec) -> list[tuple[str, str, float, Callable[[Spec, float]
                     lambda s, v: s.with_('backlash', v)))
     if 'presliding' in spec.names:
         dists, c, r = spec.eta['presliding']
-        out.append(('presliding', 'd0', 1.0,
-                    lambda s, v: s.with_('presliding', (tuple(d * v for d in dists), c, r))))
+        # each element's distance is searched freely (``_free_gms``), so each is a
+        # parameter of the fit: a common scale alone would leave out how poorly the
+        # stiffest (shortest) element is pinned down, and Σk is dominated by it
+        for j in range(len(dists)):
+            out.append(('presliding', f'd{j}', 1.0,
+                        lambda s, v, j=j: s.with_('presliding', (tuple(
+                            d * v if i == j else d for i, d in enumerate(dists)), c, r))))
         out.append(('presliding', 'c', c,
                     lambda s, v: s.with_('presliding', (dists, v, r))))
     return out
@@ -1823,11 +1867,48 @@ def processing_spread(D: Data, spec: Spec, model: AxisModel) -> dict[str, dict[s
     (nonlinear ones too) one Gauss–Newton step from the fit on each processing.
     """
     D2 = Data(D.kins, D.model, folds=D.folds, smoother_scale=2.0 * D.smoother_scale)
+    return _spread(D, D2, spec, model)
+
+
+def measurement_spread(D: Data, spec: Spec, model: AxisModel, *,
+                       seed: int = 0) -> dict[str, dict[str, float]]:
+    """How far each decoded parameter moves when the position is measured again [SI].
+
+    Every column is built from the measured position, so its error (encoder
+    quantisation, noise) sits in the regressors as well as the target: an
+    errors-in-variables bias that the jackknife, which resamples the residuals, does
+    not see.  It matters where a parameter lives at the encoder's resolution — a GMS
+    element whose break-away distance is a few counts carries most of ``Σk`` — and
+    left ``Σk`` 0.2–1 % off with standard errors of 0.05–0.2 % on single-element
+    runs (``test_workbench_coverage``).  Following SIMEX (Cook & Stefanski 1994: the
+    bias grows with the error variance, so adding the same variance again shows it),
+    the same sliding samples are refitted from positions with a second error of the
+    measured size, ``σ = max(noise, quantum/√12)``, and the shift of each parameter,
+    one Gauss–Newton step from the fit on each, is reported as a spread (a fixed
+    ``seed`` keeps a fit reproducible).
+    """
+    rng = np.random.default_rng(seed)
+    kins = []
+    for kin in D.kins:
+        sigma = max(kin.noise_std(), kin.quantum() / math.sqrt(12.0))
+        pos = kin.position + rng.normal(0.0, sigma, len(kin.position)) if sigma > 0 \
+            else kin.position
+        k2 = dataclasses.replace(kin, position=pos)
+        x, v, a = k2.derivatives(pos)
+        kins.append(dataclasses.replace(k2, x=x, v=v, a=a))
+    D2 = Data(kins, D.model, folds=D.folds, smoother_scale=D.smoother_scale,
+              masks=D.masks)
+    return _spread(D, D2, spec, model)
+
+
+def _spread(D: Data, D2: Data, spec: Spec, model: AxisModel) -> dict[str, dict[str, float]]:
+    """``|φ(D2) − φ(D)|`` per decoded parameter, each one Gauss–Newton step from ``spec``."""
     out: dict[str, dict[str, float]] = {}
     try:
         v1, idx = _gauss_newton_point(D, spec, model)
         v2, _ = _gauss_newton_point(D2, spec, model)
     except (np.linalg.LinAlgError, ValueError):
+        sync(D, spec, model)
         return out
     nan_cov = np.full((len(idx), len(idx)), np.nan)
     _, s1, _, _ = decode(spec, model, v1, idx, nan_cov)
@@ -1968,7 +2049,7 @@ def decode(spec: Spec, model: AxisModel, vals: dict, idx: dict, cov: np.ndarray)
     if gms:
         fns['presliding'] = {
             'stiffness': lambda v: sum(max(g(v, 'presliding', f'b{j}'), 0.0) / (
-                dists[j] * g(v, 'presliding', 'd0', 1.0)) for j in range(nd)),
+                dists[j] * g(v, 'presliding', f'd{j}', 1.0)) for j in range(nd)),
             'c': lambda v: g(v, 'presliding', 'c'),
             'elements': lambda v: float(sum(g(v, 'presliding', f'b{j}') > 0
                                             for j in range(nd)))}

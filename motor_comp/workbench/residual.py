@@ -74,10 +74,7 @@ def sliding_mask(kin: Kinematics) -> np.ndarray:
     noise gain, so the threshold adapts to the sensor and the sample rate.
     """
     coeff_noise = np.sqrt(np.sum(_savgol_deriv_coeffs(kin.window, kin.polyorder) ** 2))
-    steps = np.abs(np.diff(kin.position))
-    nz = steps[steps > 0]
-    quantum = float(np.min(nz)) if nz.size else 0.0
-    sigma_x = max(kin.noise_std(), quantum / np.sqrt(12.0))
+    sigma_x = max(kin.noise_std(), kin.quantum() / np.sqrt(12.0))
     v_min = 5.0 * sigma_x * coeff_noise / kin.dt
     # never below 0.2 % of the peak speed: sign(v) of a near-stopped axis is arbitrary
     v_min = max(v_min, 2e-3 * float(np.max(np.abs(kin.v))))
@@ -262,8 +259,7 @@ def _pauses(kin: Kinematics) -> tuple:
 
 def _position_tolerance(kin: Kinematics) -> float:
     """Return the band [m] a position at rest stays in: 3σ of the noise, half a count."""
-    dpos = np.abs(np.diff(kin.position))
-    return max(3.0 * kin.noise_std(), 0.5 * float(np.min(dpos[dpos > 0], initial=0.0)))
+    return max(3.0 * kin.noise_std(), 0.5 * kin.quantum())
 
 
 @njit(cache=True)

@@ -104,6 +104,21 @@ def test_irregular_sampling_is_resampled():
     np.testing.assert_allclose(kin.v, 0.02, rtol=1e-9)
 
 
+@given(counts=st.integers(min_value=1, max_value=50),
+       q=st.sampled_from([1e-7, 5e-7, 2e-6, 2 * np.pi / 2 ** 16]))
+@settings(max_examples=30, deadline=None)
+def test_quantum_is_the_encoder_resolution(counts, q):
+    """``Kinematics.quantum``: the smallest nonzero step of a quantised position."""
+    t = np.arange(400) * 1e-3
+    x = q * np.round(counts * q * np.sin(2 * np.pi * t) / q + 0.3 * np.sin(40 * t))
+    run = Run(t=t, position=x, voltage=np.zeros_like(t))
+    kin = kinematics(run)
+    assert kin.quantum() == pytest.approx(q, rel=1e-6)
+    still = kinematics(Run(t=t, position=np.full_like(t, 0.1),
+                           voltage=np.zeros_like(t)))
+    assert still.quantum() == 0.0
+
+
 def test_bad_run_arrays_are_input_errors():
     t = np.arange(0, 1, DT)
     x = np.sin(t)
