@@ -10,6 +10,13 @@ and a mass off by 2×), so this measures the uncertainty of the estimates, not t
 choice of effects (the independent suite judges that).  A parameter reported "at its
 bound" has no standard error and counts as a miss.
 
+Measured 2026-11-26 (idle machine, 18 s on two processes) after three changes to the
+GMS: each element's distance a parameter of the Jacobian, the measurement spread
+(``ident.measurement_spread``), and a stiffer element grown back when it pays
+(``ident._grow_gms``) — with the encoder quantum no longer lost to ``np.min``'s
+``initial``: presliding.stiffness 29/30 (13/30 before), backlash.width 25/30, mass
+139/150, the rest as below.
+
 Measured (2026-11-25, one process, ~3.5 min): with the stretch-jackknife SEs plus the
 processing spread ``fit`` adds (``ident.processing_spread``), the nonlinear parameters
 re-searched after each ``--add``, the ripple columns matched to the acceleration
