@@ -164,6 +164,12 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
     unc = {g: {k: float(math.hypot(v, *(s.get(g, {}).get(k, 0.0) for s in spreads)))
                for k, v in d.items()}
            for g, d in est.se.items()}
+    if 'backlash' in est.spec.names and 'width' in unc.get('backlash', {}):
+        # the gap's SSE profile is one-sided (ident.gap_profile_se): the jackknife's
+        # local curvature understates how far above the fit the data allow it
+        prof = idm.gap_profile_se(eng.D, est.spec, est.model)
+        if math.isfinite(prof):
+            unc['backlash']['width'] = max(unc['backlash']['width'], prof)
     final = est.model
     s = common_scale(model, est)
     if s is not None and set(final.names) >= set(model.names):
