@@ -240,6 +240,11 @@ class Data:
         self._cache_max = max(400, COLUMN_CACHE_BYTES // (8 * max(self.n, 1)))
         self._gram: dict = {}
         self._row_sets: dict = {}
+        #: √weights of the rows (None: ordinary least squares), applied to every
+        #: column and the target (:func:`set_weights`); ``weight_id`` keys the caches
+        self.sw: np.ndarray | None = None
+        self.weight_id = 0
+        self.speed_weights: tuple | None = None
         self._a = None
         starts = np.asarray(self.starts)
         self._part_bounds = list(zip(starts.tolist(), np.append(starts[1:], self.n).tolist()))
@@ -367,8 +372,29 @@ class Data:
         return out
 
     def key(self, key: tuple) -> tuple:
-        """Cache key of a column: its own key and the motion it was computed on."""
-        return key + (self.width0, self.motion)
+        """Cache key of a column: its own key, the motion and the row weights."""
+        return key + (self.width0, self.motion, self.weight_id)
+
+    def set_speed_weights(self, weights: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """Weight each row by its speed band from now on; None: unweighted.
+
+        ``weights`` is ``(edges, w)``: bands ``edges[i] ≤ |ẋ| < edges[i+1]`` [m/s or
+        rad/s] with weight ``w[i]`` (> 0), the last band open-ended.  A rule, not a
+        vector: a second processing of the same runs (:func:`processing_spread`) weights
+        its own rows by it.
+        """
+        self.speed_weights = weights
+        if weights is None:
+            self.sw, self.weight_id = None, 0
+            return
+        edges, w = (np.asarray(a, dtype=float) for a in weights)
+        if len(w) != len(edges) or not np.all(np.isfinite(w)) or np.any(w <= 0):
+            raise ParameterError('speed weights must be finite and positive, one per band')
+        band = np.clip(np.searchsorted(edges, np.abs(self.vl()), side='right') - 1, 0,
+                       len(w) - 1)
+        self.sw = np.sqrt(w[band])
+        self._weights_set = getattr(self, '_weights_set', 0) + 1
+        self.weight_id = self._weights_set
 
     # -- Gram entries, cached by column key ----------------------------------------
     def rows_id(self, rows: np.ndarray | None) -> int:
@@ -1007,7 +1033,8 @@ def keyed_columns(D: Data, spec: Spec) \
         return D.smooth_gather(fn, key)
 
     def add(group: str, label: str, c: np.ndarray, key: tuple | None = None) -> None:
-        cols.append(np.asarray(c, dtype=float))
+        c = np.asarray(c, dtype=float)
+        cols.append(c if D.sw is None else c * D.sw)
         labels.append((group, label))
         keys.append(key if key is not None else last.pop('key'))
 
@@ -1094,7 +1121,7 @@ def target(D: Data, spec: Spec) -> np.ndarray:
             ('stuck_u', float(tau)))
     if not spec.mass_free:
         y = y - spec.mass * D.al()
-    return y
+    return y if D.sw is None else y * D.sw
 
 
 def target_key(D: Data, spec: Spec) -> tuple:
@@ -1867,6 +1894,7 @@ def processing_spread(D: Data, spec: Spec, model: AxisModel) -> dict[str, dict[s
     (nonlinear ones too) one Gauss–Newton step from the fit on each processing.
     """
     D2 = Data(D.kins, D.model, folds=D.folds, smoother_scale=2.0 * D.smoother_scale)
+    D2.set_speed_weights(D.speed_weights)
     return _spread(D, D2, spec, model)
 
 
@@ -1898,6 +1926,7 @@ def measurement_spread(D: Data, spec: Spec, model: AxisModel, *,
         kins.append(dataclasses.replace(k2, x=x, v=v, a=a))
     D2 = Data(kins, D.model, folds=D.folds, smoother_scale=D.smoother_scale,
               masks=D.masks)
+    D2.set_speed_weights(D.speed_weights)
     return _spread(D, D2, spec, model)
 
 

@@ -38,6 +38,15 @@ def hidden_runs():
     return out
 
 
+def effects_of(steps) -> list:
+    """The effects of a fit's steps, without its closing speed-weighted refit."""
+    out = [s.effect for s in steps]
+    while len(out) > 1 and out[-1] == 'refit' and 'weighted by speed band' in \
+            steps[len(out) - 1].summary:
+        out.pop()
+    return out
+
+
 @pytest.mark.parametrize('name', LINEAR_VOCABULARY)
 def test_hidden_effect_is_ranked_first_and_recovered(hidden_runs, name):
     sc, kin = hidden_runs[name]
@@ -48,7 +57,7 @@ def test_hidden_effect_is_ranked_first_and_recovered(hidden_runs, name):
     assert best.explained > 0.6
 
     result = fit(kin, sc.model, add=[name])
-    assert [s.effect for s in result.steps] == [None, name]
+    assert effects_of(result.steps) == [None, name]
     before, after = result.steps[0].force_nrmse, result.steps[-1].force_nrmse
     assert after <= 0.5 * before, (before, after)
 
@@ -73,7 +82,7 @@ def test_no_false_effect_when_model_is_right(clean_run):
     assert d.baseline_nrmse < 0.03
     # and the auto fit adds nothing
     res = fit(kin, sc.model, auto=True)
-    assert [s.effect for s in res.steps] == [None]
+    assert effects_of(res.steps) == [None]
 
 
 def test_wrong_mass_is_reported_as_mass(clean_run):
