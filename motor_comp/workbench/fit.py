@@ -205,7 +205,7 @@ WEIGHT_CONTRAST = 10.0
 
 
 def _reweighted(eng: Engine, est: idm.Estimate) -> tuple[idm.Estimate, str] | None:
-    """The final model's parameters by weighted least squares over speed bands.
+    """Re-estimate the final model by weighted least squares over speed bands.
 
     On a run with many turns (a chirp on an axis with strong Coulomb friction), the
     rows near a turn carry residuals 10–50× those of the sliding rows: how a turn is
@@ -263,7 +263,7 @@ def _reweighted(eng: Engine, est: idm.Estimate) -> tuple[idm.Estimate, str] | No
 
 
 def _uncertainty(eng: Engine, est: idm.Estimate) -> dict[str, dict[str, float]]:
-    """Standard errors with the processing's and the measurement's share [SI].
+    """Return the standard errors with the processing's and the measurement's share [SI].
 
     √(SE² + spread²) for each spread: how far each parameter moves with a smoother
     twice as long (:func:`ident.processing_spread`) and with the position measured

@@ -1931,7 +1931,7 @@ def measurement_spread(D: Data, spec: Spec, model: AxisModel, *,
 
 
 def gap_profile_se(D: Data, spec: Spec, model: AxisModel, *, level: float = 4.0) -> float:
-    """Standard error of the backlash width from its profile-likelihood interval [m].
+    """Return the backlash width's standard error from its profile-likelihood interval [m].
 
     The force residual bounds the gap sharply from below (a flight that ends before
     the load moves leaves it stuck under a driving force) but only weakly from above:
