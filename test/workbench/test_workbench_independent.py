@@ -293,10 +293,10 @@ def fresh_outcomes():
 def test_must_show_on_the_independent_suite(fresh_outcomes):
     """≥ 95 % of cases: exact effects, mass within 3 %, parameters, NRMSE ≤ 1.1× truth.
 
-    Measured 2026-11-26 on seeds 3–4: 96.2 % (75 of 78; misses: a false dead time on a
-    spring chirp, a Stribeck fs/vs trade-off, c+ripple+delay s4 NRMSE 1.19×).  Other
-    seed pairs, for the record (``bench/workbench_independent.py``): 1–2 96.2 %, 5–6
-    96.2 %, 7–8 92.3 %; 297 of 312 fits over seeds 1–8 (95.2 %).
+    Measured 2026-11-26 on seeds 3–4: 97.4 % (76 of 78; misses: a false dead time on a
+    spring chirp, a Stribeck fs/vs trade-off).  Other seed pairs, for the record
+    (``bench/workbench_independent.py``): 1–2 97.4 %, 5–6 100 %, 7–8 94.9 %; 304 of
+    312 fits over seeds 1–8 (97.4 %).
     """
     s = summary(fresh_outcomes)
     failed = [f'{o.label} seed {o.seed}: {o.why()}' for o in fresh_outcomes if not o.passed]
@@ -349,6 +349,15 @@ FORMER_MISSES = (
     # ... and the guard of that rule: at 100 Hz a set-valued stick, crossed within one
     # sample, was taken as a 1.4e-4 rad GMS
     ('coulomb+viscous+gravity [rot cur 100Hz sweep m0.6]', 3),
+    # a GMS distance 2.4 % long (NRMSE 2× the truth's); a stiffest element at 8.6 µm
+    # for 30 µm (Σk 2.4×); an element at the 3-count resolution floor (Σk 2.3×): the
+    # per-element scan and refinement (ident._polish_gms), no growth to the floor
+    ('presliding [lin vol 2000Hz sweep m0.6]', 1),
+    ('presliding [lin vol 2000Hz sweep m0.6]', 7),
+    ('presliding [lin vol 2000Hz sweep m0.6]', 5),
+    # a dead time 0.23 ms long on a Coulomb + ripple chirp: the turns' residual set it
+    # (fit._reweighted)
+    ('coulomb+ripple+delay [lin vol 1000Hz chirp m2]', 5),
 )
 
 
