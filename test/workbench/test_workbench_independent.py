@@ -293,10 +293,9 @@ def fresh_outcomes():
 def test_must_show_on_the_independent_suite(fresh_outcomes):
     """≥ 95 % of cases: exact effects, mass within 3 %, parameters, NRMSE ≤ 1.1× truth.
 
-    Measured 2026-11-26 on seeds 3–4: 97.4 % (76 of 78; misses: a false dead time on a
-    spring chirp, a Stribeck fs/vs trade-off).  Other seed pairs, for the record
-    (``bench/workbench_independent.py``): 1–2 97.4 %, 5–6 100 %, 7–8 94.9 %; 304 of
-    312 fits over seeds 1–8 (97.4 %).
+    Measured 2026-11-26 on seeds 3–4: 98.7 % (77 of 78; the miss: a Stribeck fs/vs
+    trade-off).  Other seed pairs, for the record (``bench/workbench_independent.py``):
+    1–2 97.4 %, 5–6 100 %, 7–8 94.9 %; 305 of 312 fits over seeds 1–8 (97.8 %).
     """
     s = summary(fresh_outcomes)
     failed = [f'{o.label} seed {o.seed}: {o.why()}' for o in fresh_outcomes if not o.passed]
@@ -358,6 +357,9 @@ FORMER_MISSES = (
     # a dead time 0.23 ms long on a Coulomb + ripple chirp: the turns' residual set it
     # (fit._reweighted)
     ('coulomb+ripple+delay [lin vol 1000Hz chirp m2]', 5),
+    # a false 1.2 ms dead time on a spring chirp (mass 15 % low): under the speed-band
+    # weights it falls within 2 SE of zero and is removed (fit._weighted_elimination)
+    ('coulomb+viscous+spring [lin vol 1000Hz chirp m0.6]', 3),
 )
 
 
