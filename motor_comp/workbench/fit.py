@@ -169,18 +169,11 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
                                  'remove'))
         steps.append(FitStep(REFIT, est.nrmse_cv, est.model, text, REFIT))
         say(f'{text}; force NRMSE {100 * est.nrmse_cv:.1f} %')
-    unc = _uncertainty(eng, est)
-    if rw is not None:
-        # the weighted fit's own SEs come out 2–3× smaller while its errors shrink
-        # ~1.5× (independent generator, coverage of the gravity runs: 25/30 on them
-        # alone), the weights being estimated from the same residuals: report the
-        # larger of the two fits' uncertainties
-        weights = eng.D.speed_weights
-        eng.D.set_speed_weights(None)
-        unc0 = _uncertainty(eng, unweighted)
-        eng.D.set_speed_weights(weights)
-        unc = {g: {k: max(v, unc0.get(g, {}).get(k, 0.0)) for k, v in d.items()}
-               for g, d in unc.items()}
+    # the weighted fit's own SEs come out 2–3× smaller while its errors shrink ~1.5×
+    # (independent generator, coverage of the gravity runs: 25/30 on them alone), the
+    # weights being estimated from the same residuals: each SE is the larger of the
+    # weighted and the plain fit's
+    unc = _uncertainty(eng, est, floor=unweighted.se if rw is not None else None)
     final = est.model
     s = common_scale(model, est)
     if s is not None and set(final.names) >= set(model.names):
@@ -335,7 +328,8 @@ def _weighted_elimination(D: idm.Data, spec: idm.Spec, model: AxisModel) \
     return spec, removed
 
 
-def _uncertainty(eng: Engine, est: idm.Estimate) -> dict[str, dict[str, float]]:
+def _uncertainty(eng: Engine, est: idm.Estimate, *,
+                 floor: dict | None = None) -> dict[str, dict[str, float]]:
     """Return the standard errors with the processing's and the measurement's share [SI].
 
     √(SE² + spread²) for each spread: how far each parameter moves with a smoother
@@ -343,10 +337,17 @@ def _uncertainty(eng: Engine, est: idm.Estimate) -> dict[str, dict[str, float]]:
     again (:func:`ident.measurement_spread`); the backlash width's is at least half
     its profile interval (:func:`ident.gap_profile_se`: the jackknife's local
     curvature understates how far above the fit a one-sided SSE profile allows it).
+    With ``floor`` (another fit's SEs), each SE is at least that.
     """
     spreads = (idm.processing_spread(eng.D, est.spec, est.model),
                idm.measurement_spread(eng.D, est.spec, est.model))
-    unc = {g: {k: float(math.hypot(v, *(s.get(g, {}).get(k, 0.0) for s in spreads)))
+    floor = floor or {}
+
+    def se_of(g: str, k: str, v: float) -> float:
+        f = floor.get(g, {}).get(k)
+        return max(v, f) if f is not None and math.isfinite(f) else v
+    unc = {g: {k: float(math.hypot(se_of(g, k, v),
+                                   *(s.get(g, {}).get(k, 0.0) for s in spreads)))
                for k, v in d.items()}
            for g, d in est.se.items()}
     if 'backlash' in est.spec.names and 'width' in unc.get('backlash', {}):

@@ -1487,13 +1487,16 @@ def _design_for(D: Data, spec: Spec, model: AxisModel) -> tuple[np.ndarray, np.n
 
 
 def best_eta(D: Data, spec: Spec, name: str, model: AxisModel,
-             rows: np.ndarray | None = None, *, stop_above: float = math.inf) -> Any:
+             rows: np.ndarray | None = None, *, stop_above: float = math.inf,
+             refine: bool = True) -> Any:
     """Nonlinear parameters of ``name`` in ``spec`` fitted on ``rows`` (all by default).
 
     A grid, then a local search from its best point.  When even the grid's best SSE is
     above ``stop_above`` (a screened candidate that cannot pay), the grid point is
     returned without the local search: it is most of the cost, and on a fitting run
-    most candidates are absent effects scored round after round.
+    most candidates are absent effects scored round after round.  ``refine=False``
+    leaves out the GMS element growth and distance polish (:func:`refine_gms`), which
+    a screened candidate gets only once it passes the screen.
     """
     rows = np.ones(D.n, dtype=bool) if rows is None else rows
     sync(D, spec.without(name), model)
@@ -1553,8 +1556,14 @@ def best_eta(D: Data, spec: Spec, name: str, model: AxisModel,
         eta = gms_eta(float(np.exp(np.clip(opt.x[0], lo_d, 0.0))),
                       float(np.exp(np.clip(opt.x[1], 0.0, np.log(1e6)))), ratio)
         eta = _free_gms(D, spec, _prune_gms(D, spec, eta, rows), rows, costs[i])
-        eta = _polish_gms(D, spec, _grow_gms(D, spec, eta, rows, costs[i]), rows)
+        if refine:
+            eta = refine_gms(D, spec, eta, rows, costs[i])
     return eta
+
+
+def refine_gms(D: Data, spec: Spec, eta: tuple, rows: np.ndarray, scale: float) -> tuple:
+    """Grow a stiffer GMS element where it pays, then polish every distance."""
+    return _polish_gms(D, spec, _grow_gms(D, spec, eta, rows, scale), rows)
 
 
 def _polish_gms(D: Data, spec: Spec, eta: tuple, rows: np.ndarray) -> tuple:
@@ -1735,7 +1744,7 @@ def cv_candidate(D: Data, spec: Spec, name: str, model: AxisModel, *,
         trials = _eta_trials(D, spec, name, model)
         # a grid optimum below half the screen's gain skips the local search
         eta_all = best_eta(D, spec.with_(name, trials[0]), name, model,
-                           stop_above=sse0 * (1.0 - 0.5 * screen))
+                           stop_above=sse0 * (1.0 - 0.5 * screen), refine=screen <= 0)
     if screen > 0:
         s1 = spec.with_(name, eta_all)
         X1, _ = _design_for(D, s1, model)
@@ -1746,6 +1755,10 @@ def cv_candidate(D: Data, spec: Spec, name: str, model: AxisModel, *,
             out = cv_design(D, X, y).sse_cv
             sync(D, spec, model)
             return out, eta_all
+        if name == 'presliding':
+            # past the screen: the element structure and distances in full
+            sync(D, spec, model)
+            eta_all = refine_gms(D, spec, eta_all, np.ones(D.n, dtype=bool), sse1)
     if name == 'ripple':
         total = 0.0
         chosen = fit_ripple_folds(D, spec, [D.train_rows(f) for f in range(D.folds)])
