@@ -634,7 +634,8 @@ class Engine:
         est = idm.estimate(self.D, spec, base.model, cv=False)
         dp = idm.n_params(spec) - idm.n_params(base.spec)
         ok, explained, bic = self.pays(base.sse_cv, sse, dp)
-        bound = bool(est.at_bound.get(name)) or _unphysical(name, est, self.span)
+        bound = bool(est.at_bound.get(name)) or _unphysical(
+            name, est, self.span, rotary=self.units.rotary)
         if bound:
             # the fit wants the effect outside its physical range (a Stribeck peak below
             # the Coulomb level, a negative friction): the clipped effect in the model
@@ -679,12 +680,18 @@ class Engine:
                                correlations=tuple(est.correlations), spec=est.spec)
 
 
-def _unphysical(name: str, est: idm.Estimate, span: tuple[float, float]) -> bool:
+def _unphysical(name: str, est: idm.Estimate, span: tuple[float, float], *,
+                rotary: bool = False) -> bool:
     """Whether the fitted ``name`` lies clearly outside its physical range.
 
     A spring's rest position ``x0`` farther from the positions ``span`` covered than
     the span itself is a constant force with a slight slope over the travel (an offset
-    by another name), not a spring the run can identify.  Direction-dependent friction
+    by another name), not a spring the run can identify.  On a rotary axis that turns
+    more than a revolution there is no spring at all (a torsion spring or a cable acts
+    within a turn; the load's weight is ``gravity``, cogging is ``ripple``): a torque
+    that grows with the angle over many turns is drift, or a direction-dependent
+    friction seen through runs that each turn one way (the HSM150 runs: a spring with
+    x0 = −4341 rad stood in for the asymmetry).  Direction-dependent friction
     splits the friction levels, ``fc± = fc ± dfc/2`` and ``fv± = fv ± dfv/2``: with
     neither level in the model there is nothing to split (its constant column is an
     offset), and the Coulomb level, when present, must stay a friction both ways
@@ -696,6 +703,8 @@ def _unphysical(name: str, est: idm.Estimate, span: tuple[float, float]) -> bool
     if name == 'spring':
         x0 = est.model.get('spring').x0
         width = span[1] - span[0]
+        if rotary and width > 2.0 * np.pi:
+            return True
         return not span[0] - width <= x0 <= span[1] + width
     if name != 'asymmetry':
         return False
