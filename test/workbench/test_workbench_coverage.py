@@ -173,18 +173,24 @@ def test_truth_within_two_standard_errors_in_90_percent(samples):
     assert not bad, ', '.join(f'{n}.{k} {h}/{m}' for (n, k), (h, m) in cov.items())
 
 
-def test_the_spreads_enter_the_reported_uncertainty():
-    """``fit`` reports √(SE² + processing² + measurement²); each spread finite, ≥ 0."""
-    from motor_comp.workbench import fit, ident, kinematics
+def _fitted(family: str, seed: int) -> tuple:
+    """``(truth, kinematics, FitResult)`` of one coverage run (``fit --add`` its effects)."""
+    from motor_comp.workbench import fit, kinematics
     from motor_comp.workbench.session import default_hold
     from test_workbench_independent import as_model
-    case = FAMILIES['gravity']
-    rig, truth = case.draw(0)
-    gen = generate(truth, rig, excitation=case.excitation, duration=DURATION, seed=0,
+    case = FAMILIES[family]
+    rig, truth = case.draw(seed)
+    gen = generate(truth, rig, excitation=case.excitation, duration=DURATION, seed=seed,
                    physics_dt=PHYSICS_DT)
     start = as_model(case.start(truth))
     kin = kinematics(gen.run, hold=default_hold(start))
-    res = fit(kin, start, add=list(truth['effects']))
+    return truth, kin, fit(kin, start, add=list(truth['effects']))
+
+
+def test_the_spreads_enter_the_reported_uncertainty():
+    """``fit`` reports √(SE² + processing² + measurement²); each spread finite, ≥ 0."""
+    from motor_comp.workbench import ident
+    _, kin, res = _fitted('gravity', 0)
     D = ident.Data([kin], res.model)
     spec = ident.spec_of(res.model)
     est = ident.estimate(D, spec, res.model)
@@ -207,16 +213,8 @@ def test_the_gap_width_error_is_its_profile_interval():
     The jackknife and the spreads gave ±0.3 µm for a 2.5 µm error (z 8.7); the profile
     interval (``ident.gap_profile_se``) is what ``fit`` reports, and it holds the truth.
     """
-    from motor_comp.workbench import fit, ident, kinematics
-    from motor_comp.workbench.session import default_hold
-    from test_workbench_independent import as_model
-    case = FAMILIES['asymmetry+delay+backlash']
-    rig, truth = case.draw(23)
-    gen = generate(truth, rig, excitation=case.excitation, duration=DURATION, seed=23,
-                   physics_dt=PHYSICS_DT)
-    start = as_model(case.start(truth))
-    kin = kinematics(gen.run, hold=default_hold(start))
-    res = fit(kin, start, add=list(truth['effects']))
+    from motor_comp.workbench import ident
+    truth, kin, res = _fitted('asymmetry+delay+backlash', 23)
     w_true = truth['effects']['backlash']['width']
     w = res.model.get('backlash').width
     D = ident.Data([kin], res.model)
@@ -238,16 +236,7 @@ def test_a_stiff_gms_element_merged_into_a_softer_one_is_grown_back():
     ``ident._grow_gms`` tries a stiffer element and keeps it when the BIC improves: the
     three distances come back within 10 % and Σk within 5 %, inside its ±2 SE.
     """
-    from motor_comp.workbench import fit, kinematics
-    from motor_comp.workbench.session import default_hold
-    from test_workbench_independent import as_model
-    case = FAMILIES['presliding']
-    rig, truth = case.draw(13)
-    gen = generate(truth, rig, excitation=case.excitation, duration=DURATION, seed=13,
-                   physics_dt=PHYSICS_DT)
-    start = as_model(case.start(truth))
-    res = fit(kinematics(gen.run, hold=default_hold(start)), start,
-              add=list(truth['effects']))
+    truth, _, res = _fitted('presliding', 13)
     t, f = truth['effects']['presliding'], res.model.to_dict()['effects']['presliding']
     fc_t = truth['effects']['coulomb']['fc']
     fc_f = res.model.to_dict()['effects']['coulomb']['fc']
