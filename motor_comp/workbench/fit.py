@@ -202,7 +202,8 @@ WEIGHT_BANDS = 20
 WEIGHT_CONTRAST = 10.0
 
 
-def _reweighted(eng: Engine, est: idm.Estimate) -> tuple[idm.Estimate, str] | None:
+def _reweighted(eng: Engine, est: idm.Estimate) \
+        -> tuple[idm.Estimate, str, list[str]] | None:
     """Re-estimate the final model by weighted least squares over speed bands.
 
     On a run with many turns (a chirp on an axis with strong Coulomb friction), the
@@ -234,21 +235,14 @@ def _reweighted(eng: Engine, est: idm.Estimate) -> tuple[idm.Estimate, str] | No
     # the residual the variances come from)
     for _ in range(2):
         weights = D.speed_weights
-        D.set_speed_weights(None)
         idm.sync(D, spec, est.model)
+        th = idm.solve_spec(D, spec)             # under the current weights, if any
+        D.set_speed_weights(None)
         X, _ = idm.columns(D, spec)
-        y = idm.target(D, spec)
-        if weights is None:
-            th, _ = idm.solve_gram(np.column_stack([X, y]).T @ np.column_stack([X, y]))
-        else:
-            D.set_speed_weights(weights)
-            Xw, _ = idm.columns(D, spec)
-            yw = idm.target(D, spec)
-            th, _ = idm.solve_gram(np.column_stack([Xw, yw]).T @ np.column_stack([Xw, yw]))
-        e = y - X @ th
-        var = np.array([np.mean(e[band == b] ** 2) if np.any(band == b) else np.nan
-                        for b in range(WEIGHT_BANDS)])
-        if not np.all(np.isfinite(var)) or np.min(var) <= 0:
+        e = idm.target(D, spec) - X @ th         # the residual itself, unweighted
+        count = np.bincount(band, minlength=WEIGHT_BANDS)
+        var = np.bincount(band, e * e, minlength=WEIGHT_BANDS) / np.maximum(count, 1)
+        if np.any(count == 0) or np.min(var) <= 0:
             D.set_speed_weights(weights)
             break
         med = float(np.median(var))
@@ -260,10 +254,13 @@ def _reweighted(eng: Engine, est: idm.Estimate) -> tuple[idm.Estimate, str] | No
         D.set_speed_weights((edges, med / var))
         if 'delay' in spec.names:
             spec = spec.with_('delay', idm.best_eta(D, spec, 'delay', est.model))
+    if first is None:
+        idm.sync(D, est.spec, est.model)
+        return None
     var, med = first
     spec, removed = _weighted_elimination(D, spec, est.model)
     new = idm.estimate(D, spec, est.model, cv=False)
-    sse = _unweighted_cv(D, spec)
+    sse = idm.cv_unweighted(D, spec)
     new = dataclasses.replace(new, sse_cv=sse, nrmse_cv=eng.nrmse(sse))
     worst = int(np.argmax(var))
     lo_v = edges[worst]
@@ -355,20 +352,6 @@ def _uncertainty(eng: Engine, est: idm.Estimate, *,
         if math.isfinite(prof):
             unc['backlash']['width'] = max(unc['backlash']['width'], prof)
     return unc
-
-
-def _unweighted_cv(D: idm.Data, spec: idm.Spec) -> float:
-    """Held-out SSE [N²], unweighted, of fold fits made with ``D``'s row weights."""
-    X, _ = idm.columns(D, spec)
-    y = idm.target(D, spec)
-    Zw = np.column_stack([X, y])
-    Pw = D.part_grams(Zw)
-    P = D.part_grams(Zw / D.sw[:, None])
-    total = 0.0
-    for f in range(D.folds):
-        th, _ = idm.solve_gram(D.train(Pw, f))
-        total += idm._sse_with(D.test(P, f), th)
-    return float(total)
 
 
 def _seed_eta(eng: Engine, est: idm.Estimate, name: str) -> Any:

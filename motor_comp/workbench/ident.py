@@ -241,9 +241,11 @@ class Data:
         self._gram: dict = {}
         self._row_sets: dict = {}
         #: √weights of the rows (None: ordinary least squares), applied to every
-        #: column and the target (:func:`set_weights`); ``weight_id`` keys the caches
+        #: column and the target (:meth:`set_speed_weights`); ``weight_id`` keys the
+        #: caches, a new number for each weighting
         self.sw: np.ndarray | None = None
         self.weight_id = 0
+        self._weightings = 0
         self.speed_weights: tuple | None = None
         self._a = None
         starts = np.asarray(self.starts)
@@ -393,8 +395,8 @@ class Data:
         band = np.clip(np.searchsorted(edges, np.abs(self.vl()), side='right') - 1, 0,
                        len(w) - 1)
         self.sw = np.sqrt(w[band])
-        self._weights_set = getattr(self, '_weights_set', 0) + 1
-        self.weight_id = self._weights_set
+        self._weightings += 1
+        self.weight_id = self._weightings
 
     # -- Gram entries, cached by column key ----------------------------------------
     def rows_id(self, rows: np.ndarray | None) -> int:
@@ -1163,6 +1165,31 @@ def cv_design(D: Data, X: np.ndarray, y: np.ndarray) -> Score:
         ths.append(th)
     _, sse = solve_gram(P.sum(axis=0))
     return Score(total, sse, X.shape[1], tuple(ths))
+
+
+def solve_spec(D: Data, spec: Spec) -> np.ndarray:
+    """Linear parameters of ``spec`` by least squares on all rows (``D``'s weights)."""
+    X, _ = columns(D, spec)
+    Z = np.column_stack([X, target(D, spec)])
+    return solve_gram(Z.T @ Z)[0]
+
+
+def cv_unweighted(D: Data, spec: Spec) -> float:
+    """Held-out SSE [N²], unweighted, of fold fits made with ``D``'s row weights.
+
+    The weighted fit is the estimator; its score is in the force units every other
+    score is in (each fold's parameters from its weighted training rows, scored on
+    its held-out rows without the weights).
+    """
+    X, _ = columns(D, spec)
+    Zw = np.column_stack([X, target(D, spec)])
+    Pw = D.part_grams(Zw)
+    P = Pw if D.sw is None else D.part_grams(Zw / D.sw[:, None])
+    total = 0.0
+    for f in range(D.folds):
+        th, _ = solve_gram(D.train(Pw, f))
+        total += _sse_with(D.test(P, f), th)
+    return float(total)
 
 
 def cv_choices(D: Data, designs: Sequence[tuple[np.ndarray, np.ndarray]]) -> float:
