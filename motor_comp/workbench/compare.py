@@ -9,6 +9,12 @@
   for closed-loop runs, where an open-loop simulation would drift away (an integrating
   plant with friction), and it shows the error in micrometres.  Fit % is computed on the
   displacement over the horizon (the position itself would give a meaningless ~100 %).
+  Every history-dependent state starts each window from the measurement (DESIGN.md §6):
+  the GMS element forces and phases from the element law run along the measured path
+  up to the origin, the motor position across a backlash gap reconstructed from the
+  load, the dead-time buffer from the commands before the origin — so a true
+  hysteretic model predicts best (started with virgin elements, the ball-screw's own
+  plant model predicted its default run worse than the same model without GMS).
 * Position, closed-loop replay: when the run was produced by this project's
   simulator (its metadata names the plant, controller and trajectory), the same loop is
   re-run with the model as plant and the tracking errors are compared.
@@ -17,6 +23,7 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import math
 from typing import Any, Mapping
 
 import numpy as np
@@ -27,7 +34,12 @@ from motor_comp.logs.run import Run
 from motor_comp.physics import kernel as K
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.plant import Sensors, initial_state, pack_params
+from motor_comp.physics.effects.presliding import gms_update
+from motor_comp.physics.effects.stribeck import stribeck_curve
+from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.derivatives import Kinematics
+from motor_comp.workbench.motion import motor_position
+from motor_comp.workbench.processing import gms_position, point_position, point_velocity
 from motor_comp.workbench.residual import Residual, residual
 
 
@@ -92,6 +104,8 @@ class Comparison:
     prediction: Prediction
     replay: Replay | None
     replay_note: str
+    rms_residual: float = float('nan')
+    rms_drive: float = float('nan')
 
     @property
     def force_fit_percent(self) -> float:
@@ -102,14 +116,12 @@ class Comparison:
         """Plain text for the terminal (``rotary``: positions are angles, shown in mrad)."""
         unit, k = ('mrad', 1e3) if rotary else ('µm', 1e6)
         p = self.prediction
-        res = self.residual
-        m = res.mask
         lines = [
             f'run {self.kin.name}: {len(self.kin)} samples at {1 / self.kin.dt:.0f} Hz'
             + (' (resampled from irregular stamps)' if self.kin.resampled else ''),
             f'force: NRMSE {100 * self.force_nrmse:.1f} % (fit {self.force_fit_percent:.1f} %),'
-            f' RMS residual {np.sqrt(np.mean(res.r[m] ** 2)):.3g} N of RMS drive force '
-            f'{np.std(res.f_in[m]):.3g} N',
+            f' RMS residual {self.rms_residual:.3g} {self.model.units.force} of RMS drive '
+            f'force {self.rms_drive:.3g} {self.model.units.force}',
             f'position, {1e3 * p.horizon:.0f} ms-ahead prediction: RMS error '
             f'{k * p.rms_error:.2f} {unit}, max {k * p.max_error:.2f} {unit} '
             f'(fit {p.fit_percent:.1f} % of the displacement)',
@@ -126,13 +138,11 @@ class Comparison:
 
     def as_dict(self) -> dict[str, Any]:
         """JSON form."""
-        res = self.residual
-        m = res.mask
         return {
             'run': self.kin.name,
             'force_nrmse': float(self.force_nrmse),
             'force_fit_percent': float(self.force_fit_percent),
-            'rms_residual': float(np.sqrt(np.mean(res.r[m] ** 2))),
+            'rms_residual': float(self.rms_residual),
             'prediction': self.prediction.as_dict(),
             'replay': self.replay.as_dict() if self.replay is not None else None,
             'replay_note': self.replay_note,
@@ -141,13 +151,39 @@ class Comparison:
 
 
 @njit(cache=True)
-def _kstep(P, S0, xm, xl, vm, u, origins, horizon, n_sub):
+def gms_states(x, alpha, k, sigma, C, fc, fs, vs, delta, dt):
+    """Element forces and phases of a GMS along a measured path ``x`` [m], per sample.
+
+    The element law of the effect (:func:`~motor_comp.physics.effects.presliding.
+    gms_update`) run from relaxed elements at the first sample; returns two
+    ``(n, elements)`` arrays: spring forces [N] and phases (0 sticking, ±1 slipping).
+    """
+    n, m = x.shape[0], alpha.shape[0]
+    F = np.zeros((n, m))
+    Z = np.zeros((n, m))
+    forces = np.zeros(m)
+    slip = np.zeros(m)
+    for j in range(1, n):
+        dx = x[j] - x[j - 1]
+        v = dx / dt
+        gms_update(forces, slip, alpha, k, sigma, C, dx, v,
+                   stribeck_curve(v, fc, fs, vs, delta), dt)
+        for e in range(m):
+            F[j, e] = forces[e]
+            Z[j, e] = slip[e]
+    return F, Z
+
+
+@njit(cache=True)
+def _kstep(P, S0, xm, xl, vm, u, origins, horizon, n_sub, gf, gz):
     # every origin restarts the kernel from the measured state and runs it `horizon`
     # control periods on the logged input; the dead-time buffer is filled with the
-    # commands held before the origin so a delayed model sees the right past
+    # commands held before the origin so a delayed model sees the right past, and the
+    # GMS elements hold the forces the measured path left in them
     n = origins.shape[0]
     out = np.empty(n)
     nbuf = S0.shape[0] - K.S_DBUF
+    m = gf.shape[1]
     for j in range(n):
         k0 = origins[j]
         S = S0.copy()
@@ -155,6 +191,9 @@ def _kstep(P, S0, xm, xl, vm, u, origins, horizon, n_sub):
         S[K.S_XL] = xl[k0]
         S[K.S_V] = vm[k0]
         S[K.S_STUCK] = 1.0 if vm[k0] == 0.0 else 0.0
+        for e in range(m):
+            S[K.S_GMS_F + e] = gf[k0, e]
+            S[K.S_GMS_SLIP + e] = gz[k0, e]
         if nbuf > 0:
             S[K.S_DHEAD] = 0.0
             for m in range(1, nbuf + 1):
@@ -166,9 +205,9 @@ def _kstep(P, S0, xm, xl, vm, u, origins, horizon, n_sub):
     return out
 
 
-def predict(kin: Kinematics, model: AxisModel, res: Residual | None = None, *,
+def predict(kin: Kinematics, model: AxisModel, res: Any = None, *,
             horizon: float = 0.02, n_sub: int = 10, max_origins: int = 5000) -> Prediction:
-    """k-step-ahead position prediction (see module docstring).
+    """Return the k-step-ahead position prediction (see the module docstring).
 
     Parameters
     ----------
@@ -179,7 +218,6 @@ def predict(kin: Kinematics, model: AxisModel, res: Residual | None = None, *,
     max_origins : int
         Upper bound on the number of prediction origins (evenly spread).
     """
-    res = res if res is not None else residual(kin, model)
     h = max(1, int(round(horizon / kin.dt)))
     n = len(kin)
     lo, hi = kin.window, n - h - kin.window
@@ -187,6 +225,13 @@ def predict(kin: Kinematics, model: AxisModel, res: Residual | None = None, *,
         raise MotorCompError(f'{kin.name}: run too short for a {horizon:g} s prediction')
     step = max(1, (hi - lo) // max_origins)
     origins = np.arange(lo, hi, step, dtype=np.int64)
+    # the measured state: the motor side of a backlash gap reconstructed from the load
+    bl, dly = model.get('backlash'), model.get('delay')
+    xm_raw = kin.position if bl is None or bl.width <= 0 else motor_position(
+        kin, bl.width, model.without('backlash', 'delay'), kin.u,
+        tau=dly.tau if dly is not None else 0.0)
+    xm = point_position(kin, xm_raw)
+    vm = point_velocity(kin, xm_raw)
     # explicit RK4 needs the physics step well inside the fastest mechanical time
     # constant M/(damping terms): a light, heavily damped model gets more sub-steps
     damp = (model.input_gain * model.back_emf + model.damping + model.fv
@@ -194,9 +239,17 @@ def predict(kin: Kinematics, model: AxisModel, res: Residual | None = None, *,
     n_sub = int(min(max(n_sub, np.ceil(kin.dt * damp / model.mass / 0.5)), 5000))
     P = pack_params(model, Sensors(encoder_resolution=0.0), kin.dt / n_sub)
     S0 = initial_state(P, 0.0)
-    pred = _kstep(P, S0, np.ascontiguousarray(res.x), np.ascontiguousarray(kin.x),
-                  np.ascontiguousarray(res.v), np.ascontiguousarray(kin.u, dtype=float),
-                  origins, h, n_sub)
+    gms = model.get('presliding')
+    if gms is not None:
+        fc, fs, vs, dl = model.stribeck_curve_params()
+        gf, gz = gms_states(np.ascontiguousarray(gms_position(kin, xm_raw)),
+                            np.array(gms.alpha), np.array(gms.k), np.array(gms.sigma),
+                            float(gms.C), fc, fs, vs, dl, kin.dt)
+    else:
+        gf = gz = np.zeros((n, 0))
+    pred = _kstep(P, S0, np.ascontiguousarray(xm), np.ascontiguousarray(kin.x),
+                  np.ascontiguousarray(vm), np.ascontiguousarray(kin.u, dtype=float),
+                  origins, h, n_sub, gf, gz)
     meas = kin.position[origins + h]
     err = meas - pred
     if not np.all(np.isfinite(err)):
@@ -285,8 +338,11 @@ def replay(run: Run, model: AxisModel) -> tuple[Replay | None, str]:
 def compare(run: Run, kin: Kinematics, model: AxisModel, *, horizon: float = 0.02,
             closed_loop: bool = True) -> Comparison:
     """Compare ``model`` with the run in force and position (see module docstring)."""
-    res = residual(kin, model)
-    pred = predict(kin, model, res, horizon=horizon)
+    data = Dataset([kin], model)
+    res = residual(kin, model, data=data)
+    pred = predict(kin, model, horizon=horizon)
     rep, note = replay(run, model) if closed_loop else (None, 'not requested')
-    return Comparison(model=model, kin=kin, residual=res, force_nrmse=res.nrmse(),
-                      prediction=pred, replay=rep, replay_note=note)
+    return Comparison(model=model, kin=kin, residual=res, force_nrmse=res.force_nrmse,
+                      prediction=pred, replay=rep, replay_note=note,
+                      rms_residual=res.force_nrmse * math.sqrt(data.den / data.n),
+                      rms_drive=math.sqrt(data.den / data.n))

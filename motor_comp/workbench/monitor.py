@@ -1,15 +1,15 @@
 """Live model health: the force residual of a model over a sliding window of a run.
 
 The core of ``monitor_node`` (no rclpy here): a window of measured position and drive
-input goes through the workbench's own inverse model
-(:func:`motor_comp.workbench.residual.residual` on
-:func:`motor_comp.workbench.derivatives.kinematics`), giving the windowed force NRMSE
-``RMS(r)/RMS(F_in − mean)`` (DESIGN.md §6) and the RMS residual [N] over the sliding
-samples.  The level is OK / WARN / ERROR by two thresholds on the NRMSE.
+input goes through the workbench's one processing and inverse model
+(:mod:`motor_comp.workbench.dataset`, :mod:`motor_comp.workbench.library`), giving the
+windowed force NRMSE ``RMS(r)/RMS(F_in − mean)`` (DESIGN.md §6) — the figure
+``compare`` and ``diagnose`` report for the same data — and the RMS residual [N].
+The level is OK / WARN / ERROR by two thresholds on the NRMSE.
 
 When the residual is large, a cheap on-line version of ``diagnose`` names the effect
 that would explain it: the residual is regressed, one candidate at a time, on the
-effects' own regressor columns (:meth:`Effect.regressors`, smoothed like the residual)
+effects' own term columns (the same processing as the residual)
 — Coulomb, viscous, Stribeck (with the model's shape), offset, spring, ripple (at the
 model's period), mass — and the candidate removing the largest share of the residual,
 after a price per parameter (BIC-like, on the window's independent samples), is named.
@@ -23,16 +23,17 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
-from typing import Any
 
 import numpy as np
 
-from motor_comp.errors import ParameterError
+from motor_comp.errors import MotorCompError, ParameterError
 from motor_comp.logs.run import Run
 from motor_comp.physics.axis import AxisModel
-from motor_comp.physics.effects import Coulomb, Offset, Ripple, Spring, Stribeck, Viscous
+from motor_comp.physics.effects import TERMS, EffectKind
+from motor_comp.physics.effects.identification import Signal
+from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.derivatives import kinematics
-from motor_comp.workbench.residual import force_nrmse, residual
+from motor_comp.workbench.library import context, design, spec_of, theta_of
 from motor_comp.workbench.session import default_hold
 
 
@@ -122,45 +123,45 @@ def check_thresholds(warn: float, error: float) -> None:
                              f'got warn {warn:g}, error {error:g}')
 
 
-def _columns(model: AxisModel, res: Any, kin: Any) -> dict[str, tuple[np.ndarray, list]]:
-    """Smoothed regressor columns of each candidate and the names of its parameters."""
-    x, v = res.x, res.v
+def _columns(model: AxisModel, data: Dataset) -> dict[str, tuple[np.ndarray, list]]:
+    """Return each screened candidate's columns at the rows (the one processing) and names.
+
+    The terms without nonlinear parameters, the model's own nonlinear terms at their
+    parameters, a Stribeck curve at a tenth of the peak speed when the model has none,
+    and the mass.
+    """
+    view = data.at()
     out: dict[str, tuple[np.ndarray, list]] = {
-        'coulomb': (kin.smooth(Coulomb().regressors(x, v)), ['fc']),
-        'viscous': (kin.smooth(Viscous().regressors(x, v)), ['fv']),
-        'offset': (Offset().regressors(x), ['f0']),
-        'spring': (kin.smooth(Spring().regressors(x)[:, :1]), ['k']),
-        'mass': (res.a[:, None], ['mass']),
-    }
-    st = model.get('stribeck')
-    if st is not None:
-        out['stribeck'] = (kin.smooth(st.regressors(x, v)), ['fs'])
-    elif model.has('coulomb'):
-        out['stribeck'] = (kin.smooth(Stribeck(vs=0.1 * max(np.max(np.abs(v)), 1e-6),
-                                               delta=2.0).regressors(x, v)), ['fs'])
-    rip = model.get('ripple')
-    if rip is not None:
-        cols = kin.smooth(Ripple(period=rip.period,
-                                 harmonics=rip.harmonics).regressors(x, v))
-        out['ripple'] = (cols, [f'{ab}{h + 1}' for h in range(cols.shape[1] // 2)
-                                for ab in 'ab'])
+        'mass': (view.signal(Signal.ACCELERATION)[:, None], ['mass'])}
+    base = spec_of(model)
+    for name, t in TERMS.items():
+        if t.kind is not EffectKind.FORCE or t.applicable(data.summary) is not None:
+            continue
+        if t.params and name not in model.names:
+            if name != 'stribeck' or not model.has('coulomb'):
+                continue
+            eta = {'vs': 0.1 * max(data.summary.speeds[95], 1e-6), 'delta': 2.0}
+        else:
+            eta = base.of(name)
+        spec = base.with_(name, eta)
+        cols = [c for c in t.columns(eta, context(spec, data))]
+        if not cols:
+            continue
+        out[name] = (np.column_stack(view.columns(cols)), [c.label for c in cols])
     return out
 
 
-def explain(model: AxisModel, res: Any, kin: Any) -> Candidate | None:
-    """Return the candidate removing most of the residual after its parameter price."""
-    m = res.mask
-    r = res.r[m]
+def explain(model: AxisModel, data: Dataset, r: np.ndarray) -> Candidate | None:
+    """Return the candidate removing most of the residual ``r`` after its parameter price."""
     sse0 = float(r @ r)
-    n = int(m.sum())
+    n = len(r)
     if sse0 <= 0 or n < 10:
         return None
-    n_eff = max(n / max(kin.window, 1), 2.0)
+    n_eff = max(data.n_eff, 2.0)
     best: tuple[float, Candidate] | None = None
-    for name, (cols, keys) in _columns(model, res, kin).items():
-        a = cols[m]
-        theta, *_ = np.linalg.lstsq(a, r, rcond=None)
-        d = r - a @ theta
+    for name, (cols, keys) in _columns(model, data).items():
+        theta, *_ = np.linalg.lstsq(cols, r, rcond=None)
+        d = r - cols @ theta
         explained = 1.0 - float(d @ d) / sse0
         score = explained - len(keys) * math.log(n_eff) / n_eff
         present = model.has(name) or (name == 'mass')
@@ -208,16 +209,22 @@ def window_health(t: np.ndarray, position: np.ndarray, command: np.ndarray,
         return stale   # at rest (or dithering by a few counts): friction holds, no model can
     run = Run(t=t - t[0], position=np.asarray(position, dtype=float),
               voltage=np.asarray(command, dtype=float), name='window')
-    kin = kinematics(run, window_s=smoothing_s, hold=default_hold(model))
-    res = residual(kin, model)
-    m = res.mask
-    if int(m.sum()) < min_samples:
+    try:
+        kin = kinematics(run, window_s=smoothing_s, hold=default_hold(model))
+        data = Dataset([kin], model, folds=2)
+    except MotorCompError:
+        return stale        # too short or too little motion for the processing
+    n_fit = int(sum(np.count_nonzero(m) for m in data.masks))
+    if n_fit < min_samples:
         return stale
-    nrmse = force_nrmse(res.r[m], res.f_in[m])
-    rms = float(np.sqrt(np.mean(res.r[m] ** 2)))
+    spec = spec_of(model)
+    d = design(data, spec, model)
+    r = d.y - d.X @ theta_of(model, spec, d.ctx)
+    nrmse = math.sqrt(float(r @ r) / data.den) if data.den > 0 else float('inf')
+    rms = float(np.sqrt(np.mean(r ** 2)))
     level = Level.OK if nrmse < warn else Level.WARN if nrmse < error else Level.ERROR
     unit = model.units.force
-    cand = explain(model, res, kin) if level is not Level.OK else None
+    cand = explain(model, data, r) if level is not Level.OK else None
     text = f'force NRMSE {100 * nrmse:.1f} % (RMS residual {rms:.3g} {unit})'
     if level is Level.OK:
         msg = f'model explains the axis: {text}'
@@ -225,4 +232,4 @@ def window_health(t: np.ndarray, position: np.ndarray, command: np.ndarray,
         msg = f'model no longer explains the axis: {text}'
         if cand is not None:
             msg += f'; candidate: {cand.sentence()}'
-    return Health(level, nrmse, rms, int(m.sum()), duration, cand, msg)
+    return Health(level, nrmse, rms, n_fit, duration, cand, msg)

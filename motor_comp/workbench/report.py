@@ -22,7 +22,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from motor_comp.errors import MotorCompError
-from motor_comp.workbench.candidates import spatial_spectrum
+from motor_comp.physics.effects.ripple import spatial_spectrum
 from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.residual import Residual, reversals
 
@@ -105,7 +105,7 @@ def whiteness(kin: Kinematics, res: Residual, *, max_lag_s: float | None = None,
     """
     step = max(1, kin.window // 2)
     m = res.mask[::step]
-    r_all = res.r[::step]
+    r_all = np.nan_to_num(res.r[::step])
     u_all = kin.u[::step]
     segs = [(a, b) for a, b in _segments(m) if b - a >= 3]
     n = sum(b - a for a, b in segs)
@@ -168,8 +168,9 @@ def since_reversal(kin: Kinematics, res: Residual, *, window_s: float = 0.2) \
     cnt = np.zeros(n)
     for k, _ in rev:
         seg = res.r[k:k + n]
-        acc[:len(seg)] += np.abs(seg)
-        cnt[:len(seg)] += 1
+        ok = np.isfinite(seg)
+        acc[:len(seg)] += np.where(ok, np.abs(seg), 0.0)
+        cnt[:len(seg)] += ok
     mean = np.where(cnt > 0, acc / np.maximum(cnt, 1), np.nan)
     return np.arange(n) * kin.dt, mean, len(rev)
 

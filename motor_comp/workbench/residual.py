@@ -1,37 +1,40 @@
 """The inverse model: the force a model leaves unexplained along a measured run.
 
-``r(t) = S[F_in(u(t − τ), ẋ_m)] − M·ẍ_m − S[Σ_k F_k(x_m, ẋ_m)]`` (DESIGN.md §3 and §6),
-where ``S`` is the zero-phase smoothing of :mod:`~motor_comp.workbench.derivatives`,
-``τ`` the model's ``delay`` and ``x_m`` the motor position — the measured (load)
-position, or with ``backlash`` the motor position reconstructed from it.  Each force
-comes from the effect modules' own laws via :meth:`AxisModel.input_force` and
-:meth:`AxisModel.effect_forces` (one implementation of each law).
+``r = S·F_in(u(t − τ)) − M·S·ẍ_m − Σ_k S·F_k(x_m, ẋ_m)`` (DESIGN.md §3 and §6), with the
+one processing of :mod:`.processing` and each force the model's own term columns times
+its coefficients (:mod:`.library`) — so the residual views, ``compare``, ``diagnose``,
+``fit`` and ``monitor_node`` read the same numbers.  ``x_m`` is the measured (load)
+position, or with ``backlash`` the motor position reconstructed from it.
 
-Samples where the axis is (nearly) at rest are left out of every fit and figure: the
-friction force of a stuck axis is whatever balances the drive, so no sliding model can
-or should explain it (see the identifiability notes in docs/tutorial.md).
+The figures use every fitted sample; the force NRMSE (:attr:`Residual.force_nrmse`) is
+the one every command reports: over the dataset's rows (every ``W/8``-th fitted
+sample), ``RMS(r)/RMS(F_in − mean)``.  Samples where the axis is at rest are left out:
+the friction of a stuck axis is whatever balances the drive.
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
-from numba import njit
 
-from motor_comp.physics import kernel as K
 from motor_comp.physics.axis import AxisModel
-from motor_comp.physics.plant import Sensors, initial_state, pack_params
-from motor_comp.workbench.derivatives import InputHold, Kinematics
+from motor_comp.physics.effects.identification import MASS, Signal
+from motor_comp.workbench.dataset import Dataset
+from motor_comp.workbench.derivatives import Kinematics
+from motor_comp.workbench.library import design, given_sse, spec_of, theta_of
+from motor_comp.workbench.motion import motor_position, reversals
+from motor_comp.workbench.processing import Processing, sliding_mask
 
 
 @dataclasses.dataclass(frozen=True)
 class Residual:
-    """Force balance of a model along a run (all forces smoothed, [N]).
+    """Force balance of a model along a run (all forces smoothed, [N]; NaN off the mask).
 
     Parameters
     ----------
     f_in : ndarray
-        Drive force ``input_gain·(u − back_emf·ẋ) − damping·ẋ`` [N].
+        Smoothed drive force ``input_gain·(u − back_emf·ẋ) − damping·ẋ`` [N].
     inertia : ndarray
         ``M·ẍ_m`` [N].
     forces : dict[str, ndarray]
@@ -39,9 +42,11 @@ class Residual:
     r : ndarray
         Residual force [N].
     x, v, a : ndarray
-        Motor kinematics used (differs from the measurement only with backlash).
+        Motor position, pointwise velocity and processed acceleration.
     mask : ndarray of bool
-        Samples in sliding motion (used for fits and figures).
+        The fitted samples (sliding, away from stops and the record's ends).
+    force_nrmse : float
+        The force NRMSE of the model on this run, as every command reports it.
     """
 
     f_in: np.ndarray
@@ -52,282 +57,61 @@ class Residual:
     v: np.ndarray
     a: np.ndarray
     mask: np.ndarray
+    force_nrmse: float = float('nan')
 
-    def nrmse(self, mask: np.ndarray | None = None) -> float:
-        """RMS(r) / RMS(F_in − mean) over ``mask`` (default: the sliding samples)."""
-        m = self.mask if mask is None else mask
-        return force_nrmse(self.r[m], self.f_in[m])
+    def nrmse(self) -> float:
+        """Return the force NRMSE (:attr:`force_nrmse`)."""
+        return self.force_nrmse
 
 
 def force_nrmse(r: np.ndarray, f_in: np.ndarray) -> float:
-    """``RMS(r)/RMS(F_in − mean(F_in))`` (DESIGN.md §6 ``force_nrmse``)."""
+    """Return ``RMS(r)/RMS(F_in − mean(F_in))`` (DESIGN.md §6 ``force_nrmse``)."""
     den = float(np.sqrt(np.mean((f_in - np.mean(f_in)) ** 2)))
     num = float(np.sqrt(np.mean(r ** 2)))
     return num / den if den > 0 else float('inf')
 
 
-def sliding_mask(kin: Kinematics) -> np.ndarray:
-    """Select the samples where the axis slides: |ẋ| above 5× its estimation noise.
+def model_nrmse(data: Dataset, model: AxisModel) -> float:
+    """Return the force NRMSE of ``model`` as given on ``data`` (no fitting)."""
+    den = data.den
+    return math.sqrt(given_sse(data, model) / den) if den > 0 else float('inf')
 
-    The velocity noise of the Savitzky–Golay derivative is estimated from the position
-    noise (or the encoder quantum when the noise is below it) and the filter's own
-    noise gain, so the threshold adapts to the sensor and the sample rate.
+
+def residual(kin: Kinematics, model: AxisModel, *, data: Dataset | None = None) -> Residual:
+    """Return the force residual of ``model`` along ``kin`` (see the module docstring).
+
+    ``data`` is the run's dataset when the caller has one (its NRMSE is then not
+    computed again).
     """
-    coeff_noise = np.sqrt(np.sum(_savgol_deriv_coeffs(kin.window, kin.polyorder) ** 2))
-    sigma_x = max(kin.noise_std(), kin.quantum() / np.sqrt(12.0))
-    v_min = 5.0 * sigma_x * coeff_noise / kin.dt
-    # never below 0.2 % of the peak speed: sign(v) of a near-stopped axis is arbitrary
-    v_min = max(v_min, 2e-3 * float(np.max(np.abs(kin.v))))
-    m = np.abs(kin.v) > v_min
-    # the filter's transient at both ends of the record is not trusted
-    m[:kin.window] = False
-    m[-kin.window:] = False
-    return m
+    data = data if data is not None else Dataset([kin], model)
+    full = Dataset([kin], model, processing=Processing(decimate=False))
+    spec = spec_of(model)
+    d = design(full, spec, model)
+    th = theta_of(model, spec, d.ctx)
+    n = len(kin)
+    rows = full.parts[0].rows
 
-
-def _savgol_deriv_coeffs(window: int, polyorder: int) -> np.ndarray:
-    from scipy.signal import savgol_coeffs
-    return savgol_coeffs(window, polyorder, deriv=1)
-
-
-def _stationary_runs(pos: np.ndarray, k_ext: int, eps: float) -> tuple[int, int]:
-    """Return the contiguous samples around ``k_ext`` whose position stays within ``eps``."""
-    ref = pos[k_ext]
-    i0 = k_ext
-    while i0 > 0 and abs(pos[i0 - 1] - ref) <= eps:
-        i0 -= 1
-    i1 = k_ext
-    while i1 < len(pos) - 1 and abs(pos[i1 + 1] - ref) <= eps:
-        i1 += 1
-    return i0, i1
-
-
-def reversals(position: np.ndarray, hysteresis: float) -> list[tuple[int, int]]:
-    """Find the direction reversals of a position record.
-
-    A reversal is declared when the position has come back by more than ``hysteresis``
-    [m] from its last extreme (a play operator on the measurement, so encoder flicker
-    does not count).  Returns ``(index of the extreme, new direction ±1)`` pairs.
-    """
-    idx, dirs = _reversals(np.ascontiguousarray(position, dtype=float), float(hysteresis))
-    return [(int(i), int(d)) for i, d in zip(idx, dirs)]
-
-
-@njit(cache=True)
-def _reversals(position, hysteresis):
-    # compiled: this runs inside the backlash width search, once per trial width
-    out_i = []
-    out_d = []
-    direction = 0
-    k_ext = 0
-    k_max = 0
-    k_min = 0
-    for k in range(1, len(position)):
-        p = position[k]
-        if direction == 0:
-            # first motion: whichever way the position first leaves its start band
-            if p > position[k_max]:
-                k_max = k
-            if p < position[k_min]:
-                k_min = k
-            if position[k_max] - p > hysteresis:
-                direction, k_ext = -1, k
-            elif p - position[k_min] > hysteresis:
-                direction, k_ext = 1, k
+    def place(vals: np.ndarray) -> np.ndarray:
+        out = np.full(n, np.nan)
+        out[rows] = vals
+        return out
+    y = d.view.y()
+    forces: dict[str, np.ndarray] = {}
+    X = d.X
+    for j, lab in enumerate(d.labels):
+        if lab == MASS:
             continue
-        if direction > 0:
-            if p > position[k_ext]:
-                k_ext = k
-            elif position[k_ext] - p > hysteresis:
-                out_i.append(k_ext)
-                out_d.append(-1)
-                direction, k_ext = -1, k
-        else:
-            if p < position[k_ext]:
-                k_ext = k
-            elif p - position[k_ext] > hysteresis:
-                out_i.append(k_ext)
-                out_d.append(1)
-                direction, k_ext = 1, k
-    return np.array(out_i, dtype=np.int64), np.array(out_d, dtype=np.int64)
+        forces[lab[0]] = forces.get(lab[0], 0.0) + X[:, j] * th[j]
+    acc = d.view.signal(Signal.ACCELERATION)
+    mass = float(th[d.labels.index(MASS)]) if MASS in d.labels else model.mass
+    motion = d.view.motions[0]
+    mask = np.zeros(n, dtype=bool)
+    mask[rows] = True
+    return Residual(f_in=place(y), inertia=place(mass * acc),
+                    forces={k: place(v) for k, v in forces.items()},
+                    r=place(d.y - X @ th), x=np.asarray(motion.x), v=np.asarray(motion.v),
+                    a=place(acc), mask=mask, force_nrmse=model_nrmse(data, model))
 
 
-def motor_position(kin: Kinematics, width: float, model: AxisModel,
-                   u: np.ndarray, *, tau: float = 0.0) -> np.ndarray:
-    """Motor position [m] reconstructed from the load position across a backlash gap.
-
-    Between reversals the motor pushes one edge of the gap, ``x_m = x_load ± width/2``.
-    The (massless, DESIGN.md §3 backlash) load stops at the instant the motor turns,
-    so a reversal of the load starts where its position comes to rest before moving
-    back — not at the extreme of a smoothed position, which a zero-phase filter moves
-    towards the end of the pause (measured on the independent generator: the flight
-    then started late, and the width search took the gap 40 % narrow to make up for
-    it).  From that instant the motor flies from rest across the gap under the model's
-    own dynamics, ``M·ẍ_m = F_in(u(t − τ), ẋ_m) − Σ F_k(x_m, ẋ_m)``, until it has
-    travelled the width and takes the load along.  With the right width this flight
-    ends when the measured load starts moving again; with a wrong one it ends early
-    (the load appears stuck under a driving force) or late (the motor jumps when the
-    load is seen moving), and the force residual grows — which is what the width
-    search minimises.
-
-    Any load reversal larger than the position noise is a gap crossing (the load only
-    comes back when the motor has crossed the whole gap), so reversals are found on
-    the raw position with a noise-sized hysteresis, whatever the trial width: a
-    closed-loop overshoot that moves the load back by less than the gap is a crossing
-    too.
-
-    Parameters
-    ----------
-    kin : Kinematics
-        The measured (load-side) run.
-    width : float
-        Gap [m].
-    model : AxisModel
-        Its forces drive the flight (its own ``backlash`` and ``delay`` are ignored).
-    u : ndarray
-        Logged input at each sample (not delayed), held or interpolated between the
-        samples as ``kin.hold`` says.
-    tau : float
-        Input dead time [s], applied inside the flight at the integrator's sub-step (a
-        shift by whole samples would move every flight by up to half a sample).
-    """
-    pos = kin.position
-    if width <= 0:
-        return pos.copy()
-    rev, starts, stops, dirs, rest, side = _pauses(kin)
-    xm = pos + 0.5 * width * side
-    if not rev:
-        return xm
-    # free flight across each gap, integrated by the compiled plant kernel (the one
-    # implementation of the axis dynamics, stiction included) for the model at hand
-    ends = np.append(starts[1:], len(pos))
-    horizon = np.maximum(np.minimum(ends - starts, 3 * (stops - starts) + 2 * kin.window + 5),
-                         0)
-    n_sub = 10
-    P = pack_params(model.without('backlash', 'delay'), Sensors(encoder_resolution=0.0),
-                    kin.dt / n_sub)
-    S0 = initial_state(P, 0.0)
-    _flights(P, S0, xm, np.ascontiguousarray(u, dtype=float), float(tau) / kin.dt,
-             kin.hold is InputHold.SAMPLE, starts, rest, dirs, horizon.astype(np.int64),
-             float(width), n_sub)
-    return xm
-
-
-def _pauses(kin: Kinematics) -> tuple:
-    """Reversals of the load, its pause at each, the rest positions, the stroke sides.
-
-    They depend on the measured position only, not on the gap: computed once per run
-    (kept on the run's :class:`Kinematics`) for the many widths a search tries.
-    Returns ``(rev, starts, stops, dirs, rest, side)``: ``side`` is ±1 per sample, the
-    direction of the stroke each sample belongs to.
-    """
-    hit = kin.__dict__.get('_backlash_pauses')
-    if hit is not None:
-        return hit
-    pos = kin.position
-    eps = _position_tolerance(kin)
-    rev = reversals(pos, 4.0 * eps + 1e-12)
-    side = np.zeros(len(pos))
-    if rev:
-        # the first stroke runs against the first reversal's new direction (a start
-        # transient of the velocity estimate can point the other way)
-        d_prev = -float(rev[0][1])
-    else:
-        moving = np.abs(kin.v) > 0.05 * np.max(np.abs(kin.v))
-        first = np.sign(kin.v[int(np.argmax(moving))])
-        d_prev = first if first != 0 else 1.0
-    starts = np.empty(len(rev), dtype=np.int64)
-    stops = np.empty(len(rev), dtype=np.int64)
-    rest = np.empty(len(rev))
-    dirs = np.empty(len(rev))
-    last = 0
-    for j, (k_ext, d_new) in enumerate(rev):
-        # the pause of the load around its extreme: where the motor turned
-        i0, i1 = _stationary_runs(pos, k_ext, 2.0 * eps)
-        i0 = max(i0, last)
-        starts[j], stops[j], dirs[j] = i0, i1, d_new
-        rest[j] = float(np.median(pos[i0:i1 + 1]))
-        side[last:i0] = d_prev
-        last = i0
-        d_prev = d_new
-    side[last:] = d_prev
-    out = (rev, starts, stops, dirs, rest, side)
-    # a frozen dataclass: the cache goes into the instance dict, like cached_property
-    kin.__dict__['_backlash_pauses'] = out
-    return out
-
-
-def _position_tolerance(kin: Kinematics) -> float:
-    """Return the band [m] a position at rest stays in: 3σ of the noise, half a count."""
-    return max(3.0 * kin.noise_std(), 0.5 * kin.quantum())
-
-
-@njit(cache=True)
-def _input_at(u, t, interpolate):
-    """Input at time ``t`` [samples]: held from the last stamp, or interpolated."""
-    n = u.shape[0]
-    if t <= 0.0:
-        return u[0]
-    i = int(np.floor(t + 1e-9))
-    if i >= n - 1:
-        return u[n - 1]
-    if interpolate:
-        return u[i] + (t - i) * (u[i + 1] - u[i])
-    return u[i]
-
-
-@njit(cache=True)
-def _flights(P, S0, xm, u, shift, interpolate, starts, rest, dirs, horizon, width, n_sub):
-    # ``shift`` = τ/dt [samples]: the input of each sub-step is taken at its middle, τ
-    # earlier (a whole-sample shift would move every flight by up to half a sample)
-    half = 0.5 * width
-    for j in range(starts.shape[0]):
-        k0 = starts[j]
-        S = S0.copy()
-        # at rest against the old edge: the load rests at ``rest``, the motor turns
-        x_start = rest[j] - half * dirs[j]
-        S[K.S_X] = x_start
-        S[K.S_XL] = x_start
-        S[K.S_V] = 0.0
-        S[K.S_STUCK] = 1.0
-        for step in range(horizon[j]):
-            k = k0 + step
-            # contact with the far edge: the load is taken along from here on
-            if (S[K.S_X] - rest[j]) * dirs[j] >= half:
-                break
-            xm[k] = S[K.S_X]
-            # sub-steps that see the same input go in one call (a held command changes
-            # once per sample at most)
-            s = 0
-            while s < n_sub:
-                val = _input_at(u, k + (s + 0.5) / n_sub - shift, interpolate)
-                e = s + 1
-                while e < n_sub and _input_at(u, k + (e + 0.5) / n_sub - shift,
-                                              interpolate) == val:
-                    e += 1
-                K.plant_advance(P, S, val, 0.0, e - s)
-                s = e
-
-
-def residual(kin: Kinematics, model: AxisModel, *, mask: np.ndarray | None = None) \
-        -> Residual:
-    """Force residual of ``model`` along ``kin`` (see module docstring)."""
-    bl = model.get('backlash')
-    dly = model.get('delay')
-    u = kin.input_at(dly.tau if dly is not None else 0.0)
-    if bl is not None and bl.width > 0:
-        # the flight is driven by the logged command itself (what the plant integrates)
-        x, v, a = kin.derivatives(motor_position(
-            kin, bl.width, model, kin.u, tau=dly.tau if dly is not None else 0.0))
-    else:
-        x, v, a = kin.x, kin.v, kin.a
-    f_in = kin.smooth(model.input_force(u, v))
-    forces = {name: kin.smooth(f) for name, f in
-              model.effect_forces(x, v, dt=kin.dt).items()}
-    inertia = model.mass * a
-    total = sum(forces.values(), np.zeros(len(kin)))
-    r = f_in - inertia - total
-    if mask is None:
-        mask = sliding_mask(kin)
-    return Residual(f_in=f_in, inertia=inertia, forces=forces, r=r, x=x, v=v, a=a,
-                    mask=mask)
+__all__ = ['Residual', 'force_nrmse', 'model_nrmse', 'motor_position', 'residual',
+           'reversals', 'sliding_mask']

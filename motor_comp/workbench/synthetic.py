@@ -22,7 +22,10 @@ import numpy as np
 from motor_comp.logs.run import Run
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import make_effect
-from motor_comp.workbench.candidates import GMS_ALPHA, GMS_K_SHAPE
+
+#: Chiew's 4-element GMS distribution (normalised slip limits and relative stiffness)
+GMS_ALPHA = (0.45, 0.30, 0.15, 0.10)
+GMS_K_SHAPE = tuple(k / 12.3e6 for k in (8e6, 3e6, 1e6, 3e5))
 
 #: the base model the workbench starts from (and the plant before hiding an effect)
 BASE_FC = 10.0      # N

@@ -3,7 +3,7 @@
 Data from the independent generator (``independent_generator.py``: its own integrator
 and controller; a massless load read by the encoder follows the motor through a play of
 width ``w``), which also returns the motor-side position — so the reconstruction of
-:func:`motor_comp.workbench.residual.motor_position` can be checked sample by sample
+:func:`motor_comp.workbench.motion.motor_position` can be checked sample by sample
 against the truth, with the true width, model and dead time.
 
 Measured (2026-11-23, family ``coulomb+viscous+asymmetry+delay+backlash``, 8 s at 1 kHz):
@@ -41,7 +41,8 @@ def _run(seed: int):
 @pytest.mark.parametrize('seed', [0, 1, 2])
 def test_motor_position_with_the_true_width_follows_the_motor(seed):
     """With the true gap, model and dead time the reconstruction is within 3 % of the gap."""
-    from motor_comp.workbench.residual import motor_position, sliding_mask
+    from motor_comp.workbench.motion import motor_position
+    from motor_comp.workbench.processing import sliding_mask
     gen, truth, true, kin = _run(seed)
     w = truth['effects']['backlash']['width']
     tau = truth['effects']['delay']['tau']

@@ -12,18 +12,18 @@ bound" has no standard error and counts as a miss.
 
 Measured 2026-11-26 (idle machine, 18 s on two processes) after three changes to the
 GMS: each element's distance a parameter of the Jacobian, the measurement spread
-(``ident.measurement_spread``), and a stiffer element grown back when it pays
-(``ident._grow_gms``) — with the encoder quantum no longer lost to ``np.min``'s
+(``uncertainty.measurement_spread``), and a stiffer element grown back when it pays
+(the vector search's growth, ``varpro``) — with the encoder quantum no longer lost to ``np.min``'s
 ``initial``: presliding.stiffness 29/30 (13/30 before), mass 139/150; and with the
-gap's SE from its one-sided SSE profile (``ident.gap_profile_se``) backlash.width
+gap's SE from its one-sided SSE profile (``uncertainty.profile_se``) backlash.width
 30/30 (25/30 before: the fit sits 1–4 % wide of the truth on a flat-topped profile).
 Every judged parameter now meets the bar.
 
 Measured (2026-11-25, one process, ~3.5 min): with the stretch-jackknife SEs plus the
-processing spread ``fit`` adds (``ident.processing_spread``), the nonlinear parameters
+processing spread ``fit`` adds (``uncertainty.processing_spread``), the nonlinear parameters
 re-searched after each ``--add``, the ripple columns matched to the acceleration
 stencil, free GMS element distances, the held command and the velocity seen through the
-stencil's own hat kernel (``Kinematics.input_at``, ``ident._stencil``) and the
+stencil's own hat kernel (``Kinematics.input_at``, ``processing.stencil``) and the
 generator at a 2 µs plant step: delay.tau 30/30, coulomb.fc 149/150, viscous.fv
 145/150, mass 138/150, spring, gravity, offset, asymmetry, stribeck and ripple 29–30/30
 each; short of the bar: backlash.width 24/30 (+1 % on average: a bias of the gap
@@ -162,7 +162,7 @@ def test_truth_within_two_standard_errors_in_90_percent(samples):
     """Reported SEs are honest: ≥ 90 % coverage of ±2 SE for every judged parameter.
 
     Measured 2026-11-26: backlash.width 30/30 (25/30 with the jackknife and the spreads
-    alone: ``ident.gap_profile_se``), presliding.stiffness 29/30, fc 149/150, fv
+    alone: ``uncertainty.profile_se``), presliding.stiffness 29/30, fc 149/150, fv
     145/150, mass 139/150, the rest 29–30 of 30.  Without the processing spread fc and
     fv fall to 81 % and 75 %; at the generator's 20 µs step the mass falls to 120/150;
     Σk without the measurement spread, the per-element distances in the Jacobian and
@@ -189,13 +189,16 @@ def _fitted(family: str, seed: int) -> tuple:
 
 def test_the_spreads_enter_the_reported_uncertainty():
     """``fit`` reports √(SE² + processing² + measurement²); each spread finite, ≥ 0."""
-    from motor_comp.workbench import ident
+    from motor_comp.workbench.dataset import Dataset
+    from motor_comp.workbench.library import spec_of
+    from motor_comp.workbench.result import estimate
+    from motor_comp.workbench.uncertainty import measurement_spread, processing_spread
     _, kin, res = _fitted('gravity', 0)
-    D = ident.Data([kin], res.model)
-    spec = ident.spec_of(res.model)
-    est = ident.estimate(D, spec, res.model)
-    spread = ident.processing_spread(D, spec, res.model)
-    meas = ident.measurement_spread(D, spec, res.model)
+    D = Dataset([kin], res.model)
+    spec = spec_of(res.model)
+    est = estimate(D, spec, res.model)
+    spread = processing_spread(D, spec, res.model)
+    meas = measurement_spread(D, spec, res.model)
     for sp in (spread, meas):
         vals = [v for d in sp.values() for v in d.values()]
         assert vals and all(math.isfinite(v) and v >= 0 for v in vals)
@@ -211,16 +214,19 @@ def test_the_gap_width_error_is_its_profile_interval():
     """Coverage seed 23: the width sits 2 % wide of a flat-topped SSE profile.
 
     The jackknife and the spreads gave ±0.3 µm for a 2.5 µm error (z 8.7); the profile
-    interval (``ident.gap_profile_se``) is what ``fit`` reports, and it holds the truth.
+    interval (``uncertainty.profile_se``) is what ``fit`` reports, and it holds the truth.
     """
-    from motor_comp.workbench import ident
+    from motor_comp.workbench.dataset import Dataset
+    from motor_comp.workbench.library import spec_of
+    from motor_comp.workbench.result import estimate
+    from motor_comp.workbench.uncertainty import profile_se
     truth, kin, res = _fitted('asymmetry+delay+backlash', 23)
     w_true = truth['effects']['backlash']['width']
     w = res.model.get('backlash').width
-    D = ident.Data([kin], res.model)
-    spec = ident.spec_of(res.model)
-    est = ident.estimate(D, spec, res.model)
-    prof = ident.gap_profile_se(D, spec, res.model)
+    D = Dataset([kin], res.model)
+    spec = spec_of(res.model)
+    est = estimate(D, spec, res.model)
+    prof = profile_se(D, spec, res.model, 'backlash', 'width')
     se = res.uncertainty['backlash']['width']
     assert se == pytest.approx(max(prof, se), rel=1e-9)
     assert abs(w - w_true) <= 2 * se
@@ -233,7 +239,7 @@ def test_the_gap_width_error_is_its_profile_interval():
 def test_a_stiff_gms_element_merged_into_a_softer_one_is_grown_back():
     """Coverage seed 13: three GMS elements, the free search alone kept two (Σk −36 %).
 
-    ``ident._grow_gms`` tries a stiffer element and keeps it when the BIC improves: the
+    The vector search tries a stiffer element and keeps it when the BIC improves: the
     three distances come back within 10 % and Σk within 5 %, inside its ±2 SE.
     """
     truth, _, res = _fitted('presliding', 13)

@@ -19,7 +19,10 @@ from motor_comp.logs.run import Run
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import make_effect
 from motor_comp.workbench import diagnose, fit, kinematics
-from motor_comp.workbench import ident
+from motor_comp.physics.effects.identification import Signal
+from motor_comp.workbench.dataset import Dataset
+from motor_comp.workbench.library import spec_of
+from motor_comp.workbench.result import estimate
 from motor_comp.workbench.report import whiteness
 from motor_comp.workbench.residual import residual
 from motor_comp.workbench.synthetic import scenario
@@ -92,8 +95,8 @@ def test_time_ordered_speed_sweep_gets_viscous_with_the_right_value(sweep_kin):
     assert res.model.fc == pytest.approx(15.8, rel=0.02)
     assert res.model.mass == pytest.approx(PMLM.mass, rel=0.02)
     # the validation folds each cover every speed of the sweep
-    D = ident.Data([sweep_kin], bare)
-    speed = np.abs(D.vl())
+    D = Dataset([sweep_kin], bare)
+    speed = np.abs(D.at().signal(Signal.VELOCITY))
     for f in range(D.folds):
         held = speed[D.fold == f]
         assert held.min() < 0.03 and held.max() > 0.15   # slow and fast in every fold
@@ -112,8 +115,8 @@ def test_standard_errors_cover_the_truth_under_coloured_noise():
         run = analytic_run(PMLM, x, v, dt, coloured=2.0, quantum=1e-6, seed=seed)
         kin = kinematics(run)
         eng_model = PMLM.replace(mass=5.0)
-        D = ident.Data([kin], eng_model)
-        est = ident.estimate(D, ident.spec_of(eng_model), eng_model, cv=False)
+        D = Dataset([kin], eng_model)
+        est = estimate(D, spec_of(eng_model), eng_model, cv=False)
         for grp, key, true in (('coulomb', 'fc', 15.8), ('viscous', 'fv', 27.6),
                                ('mass', 'mass', 7.1)):
             got, se = est.scalars[grp][key], est.se[grp][key]

@@ -18,7 +18,7 @@ from motor_comp.logs.importers import import_table
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import make_effect
 from motor_comp.workbench import diagnose, fit, kinematics
-from motor_comp.workbench.candidates import spatial_spectrum
+from motor_comp.physics.effects.ripple import spatial_spectrum
 
 REPO = Path(__file__).resolve().parents[2]
 CANDIDATES = [Path('/work/shared/data/odrive_cogging'),

@@ -4,15 +4,18 @@ A Coulomb column that switches at the sign change of a short derivative switches
 sample late or early at each reversal; on the project's own chirp the joint least
 squares then preferred a spurious dead time of 0.7 ms with the mass 25 % low.  The
 columns now switch at the reversal instant located sub-sample from the raw position
-(:func:`motor_comp.workbench.ident.reversal_shares`), and where the axis sticks at a turn
-the friction is the drive force (:func:`motor_comp.workbench.ident.target`).
+(:func:`motor_comp.workbench.turns.reversal_shares`), and where the axis sticks at a turn
+the friction is the drive force (:func:`motor_comp.workbench.library.target`).
 """
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from motor_comp.workbench import ident
+from motor_comp.workbench.dataset import Dataset
+from motor_comp.workbench.library import Spec, design
+from motor_comp.workbench.turns import reversal_shares
+from motor_comp.workbench.varpro import search
 from motor_comp.workbench import kinematics
 from motor_comp.workbench.synthetic import scenario
 
@@ -49,7 +52,7 @@ def _instant(col: np.ndarray, a: int, b: int) -> float:
 def test_reversal_instant_sub_sample(t0: float) -> None:
     # noise-free: the instant to a few hundredths of a sample
     x, v = _two_arcs(t0)
-    fwd, bwd, _ = ident.reversal_shares(x, v, half=8)
+    fwd, bwd, _ = reversal_shares(x, v, half=8)
     np.testing.assert_allclose(fwd + bwd, 1.0, atol=1e-12)
     k = np.arange(len(x))
     # forward before the turn: the area of the unit hat kernel at k left of t0
@@ -65,7 +68,7 @@ def test_reversal_instant_quantized_and_noisy() -> None:
     for seed in range(40):
         t0 = 40.0 + (seed % 10) / 10.0
         x, v = _two_arcs(t0, quantum=1e-6, noise=2e-7, seed=seed)
-        fwd, bwd, _ = ident.reversal_shares(x, v, half=8)
+        fwd, bwd, _ = reversal_shares(x, v, half=8)
         errs.append(_instant(fwd - bwd, 30, 50) - t0)
     errs = np.array(errs)
     assert np.max(np.abs(errs)) < 0.3
@@ -81,7 +84,7 @@ def test_stick_at_a_turn_is_located_and_counted_stuck() -> None:
     x = -0.5 * 3.0 * d0 ** 2 + 40.0 * d0 ** 3 - 300.0 * d1 ** 3
     v = np.where(k < ta, -3.0 * d0 + 120.0 * d0 ** 2, -900.0 * d1 ** 2)
     v[(k > ta) & (k < tb)] = 0.0
-    fwd, bwd, stuck = ident.reversal_shares(x, v, half=8)
+    fwd, bwd, stuck = reversal_shares(x, v, half=8)
     np.testing.assert_allclose(fwd + bwd + stuck, 1.0, atol=1e-12)
     assert abs(np.sum(stuck) - (tb - ta)) < 0.1
     # forward share: all of the kernel before ta; backward: all of it after tb
@@ -89,7 +92,7 @@ def test_stick_at_a_turn_is_located_and_counted_stuck() -> None:
     assert abs(_instant(fwd + stuck - bwd, 30, 55) - tb) < 0.15
     # a stop shorter than MIN_STICK samples is a plain turn
     x, v = _two_arcs(40.4)
-    assert np.sum(ident.reversal_shares(x, v, half=8)[2]) == 0.0
+    assert np.sum(reversal_shares(x, v, half=8)[2]) == 0.0
 
 
 def test_touch_and_record_ends_keep_the_sign() -> None:
@@ -98,12 +101,12 @@ def test_touch_and_record_ends_keep_the_sign() -> None:
     v = 1e-3 * (k - 30.0) ** 2 + 1e-4
     v[29:32] = [-1e-5, 2e-5, -1e-5]                # noisy sign near the slow point
     x = np.cumsum(v) * 1e-3
-    fwd, bwd, _ = ident.reversal_shares(x, v, half=8)
+    fwd, bwd, _ = reversal_shares(x, v, half=8)
     np.testing.assert_array_equal(fwd, (v > 0).astype(float))
     np.testing.assert_array_equal(bwd, (v < 0).astype(float))
     # a reversal closer to the record start than the fit's half-width: left as is
     x, v = _two_arcs(3.4, n=30)
-    fwd, bwd, _ = ident.reversal_shares(x, v, half=8)
+    fwd, bwd, _ = reversal_shares(x, v, half=8)
     np.testing.assert_array_equal(fwd - bwd, np.sign(v))
 
 
@@ -115,16 +118,12 @@ def test_project_chirp_delay_and_mass_unbiased() -> None:
     """
     sc = scenario(('delay',), seed=3)
     kin = kinematics(sc.run(duration=30.0, seed=3))
-    D = ident.Data([kin], sc.plant)
-    spec = ident.Spec(('coulomb', 'viscous', 'delay'), {'delay': 0.0})
-    tau = ident.best_eta(D, spec, 'delay', sc.plant)
-    spec = spec.with_('delay', tau)
-    ident.sync(D, spec, sc.plant)
-    X, labels = ident.columns(D, spec)
-    y = ident.target(D, spec)
-    Z = np.column_stack([X, y])
-    th, _ = ident.solve_gram(Z.T @ Z)
-    got = dict(zip(labels, th))
+    D = Dataset([kin], sc.plant)
+    spec = Spec(('coulomb', 'viscous', 'delay'), {'delay': {}})
+    tau = search(D, spec, 'delay', sc.plant)['tau']
+    d = design(D, spec.with_('delay', {'tau': tau}), sc.plant)
+    th, _ = d.solve()
+    got = dict(zip(d.labels, th))
     assert abs(tau - sc.truth['delay']['tau']) < 1e-4
     assert abs(got[('mass', 'mass')] / sc.plant.mass - 1.0) < 0.035
     assert abs(got[('coulomb', 'fc')] - 10.0) < 0.2

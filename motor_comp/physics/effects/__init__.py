@@ -10,6 +10,7 @@ from motor_comp.physics.effects.base import BOTH_AXES, AxisKind, Effect, EffectK
 from motor_comp.physics.effects.coulomb import Coulomb
 from motor_comp.physics.effects.delay import Delay
 from motor_comp.physics.effects.gravity import Gravity
+from motor_comp.physics.effects.identification import Term
 from motor_comp.physics.effects.offset import Offset
 from motor_comp.physics.effects.presliding import Presliding
 from motor_comp.physics.effects.ripple import Ripple
@@ -26,6 +27,18 @@ EFFECTS: dict[str, type[Effect]] = {
 VOCABULARY: tuple[str, ...] = tuple(EFFECTS)
 
 
+def _terms() -> dict[str, Term]:
+    from motor_comp.physics.effects import asymmetry, backlash, coulomb, delay, gravity, \
+        offset, presliding, ripple, spring, stribeck, viscous
+    mods = (coulomb, viscous, stribeck, presliding, ripple, offset, spring, asymmetry, delay,
+            backlash, gravity)
+    return {m.TERM.name: m.TERM for m in mods}
+
+
+#: each effect's identification declarations (its module's ``TERM``), vocabulary order
+TERMS: dict[str, Term] = _terms()
+
+
 def make_effect(name: str, params: Mapping[str, Any] | None = None) -> Effect:
     """Build the effect called ``name`` from model-file parameters."""
     try:
@@ -36,6 +49,6 @@ def make_effect(name: str, params: Mapping[str, Any] | None = None) -> Effect:
     return cls.from_params(params)
 
 
-__all__ = ['EFFECTS', 'VOCABULARY', 'AxisKind', 'BOTH_AXES', 'Effect', 'EffectKind',
+__all__ = ['EFFECTS', 'TERMS', 'VOCABULARY', 'AxisKind', 'BOTH_AXES', 'Effect', 'EffectKind',
            'make_effect', 'Asymmetry', 'Backlash', 'Coulomb', 'Delay', 'Gravity', 'Offset',
            'Presliding', 'Ripple', 'Spring', 'Stribeck', 'Viscous']

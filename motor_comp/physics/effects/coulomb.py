@@ -2,12 +2,14 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import Any, Mapping
 
 import numpy as np
 from numba import njit
 
 from motor_comp.errors import check_nonnegative
 from motor_comp.physics.effects.base import Effect
+from motor_comp.physics.effects.identification import Column, Context, Term
 
 
 @njit(cache=True)
@@ -43,3 +45,41 @@ class Coulomb(Effect):
     def regressors(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Columns whose coefficients are ``[fc]`` (the law is linear in fc)."""
         return np.sign(np.asarray(v, dtype=float))[:, None]
+
+
+class CoulombTerm(Term):
+    """Identification of Coulomb friction: ``fc`` on the signed share of sliding.
+
+    The column is not ``sgn ẋ`` of an estimated velocity but the share of each
+    sample's acceleration kernel spent sliding forward minus backward (the turn model
+    of the workbench places a reversal between samples); on a run that slides one way
+    only it is that direction throughout.  ``fc ≥ 0`` inside the estimator.
+    """
+
+    name = 'coulomb'
+    effect = Coulomb
+    dry_friction = True
+    force_scaled = (('coulomb', 'fc'),)
+
+    def columns(self, eta: Mapping, ctx: Context) -> list[Column]:
+        """Return the ``fc`` column."""
+        if ctx.direction:
+            d = float(ctx.direction)
+            return [Column('fc', ('direction', d), lambda p, d=d: np.full(len(p.v), d),
+                           lo=0.0)]
+        return [Column('fc', ('sgn_shares',), lambda p: p.fwd - p.bwd, lo=0.0)]
+
+    def encode(self, values: Mapping, eta: Mapping, ctx: Context) -> list[Effect]:
+        """Return the fitted Coulomb effect."""
+        return [Coulomb(fc=max(float(values.get((self.name, 'fc'), 0.0)), 0.0))]
+
+    def decode(self, model: Any) -> tuple[dict, dict]:
+        """Return ``fc``."""
+        return {'fc': model.get(self.name).fc}, {}
+
+    def scalars(self, eta: Mapping, ctx: Context) -> dict:
+        """Report ``fc`` [N]."""
+        return {('coulomb', 'fc'): lambda v: float(v.get(('coulomb', 'fc'), 0.0))}
+
+
+TERM = CoulombTerm()

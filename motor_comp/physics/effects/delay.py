@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import Any, Mapping
 
 import numpy as np
 
 from motor_comp.errors import ParameterError, check_nonnegative
 from motor_comp.physics.effects.base import Effect, EffectKind
+from motor_comp.physics.effects.identification import Context, Param, Summary, Term
 
 #: longest dead time the plant accepts [s]
 MAX_DELAY_S = 0.1
@@ -60,3 +62,41 @@ class Delay(Effect):
             u = np.concatenate(([0.0], u))
             return np.interp(np.asarray(t[1:]) - self.tau, t, u, left=0.0)
         return np.interp(t - self.tau, t, u, left=0.0)
+
+
+class DelayTerm(Term):
+    """Identification of an input dead time ``τ``: the drive force from ``u(t − τ)``.
+
+    No column of its own (an input effect): the workbench computes the drive force with
+    the trial delay.  Searched from 0 to 30 ms or a tenth of the shortest run, in half
+    samples, then refined between grid points; inside each fold ±2 samples around the
+    all-data value in sixteenths.
+    """
+
+    name = 'delay'
+    effect = Delay
+    params = ('tau',)
+    null = ('tau', 0.0)
+    shape = ('tau', 0.05)
+
+    def space(self, s: Summary, ctx: Context) -> tuple[Param, ...]:
+        """Return ``tau`` [s]."""
+        hi = min(0.03, 0.1 * s.duration)
+        grid = tuple(np.arange(0.0, hi + 1e-12, max(0.5 * s.dt, hi / 60.0)))
+        return (Param('tau', 0.0, hi, grid=grid,
+                      steps=tuple(s.dt * np.linspace(-2.0, 2.0, 17))),)
+
+    def encode(self, values: Mapping, eta: Mapping, ctx: Context) -> list[Effect]:
+        """Return the fitted delay."""
+        return [Delay(tau=max(float(eta['tau']), 0.0))]
+
+    def decode(self, model: Any) -> tuple[dict, dict]:
+        """Return no coefficient and ``tau``."""
+        return {}, {'tau': model.get(self.name).tau}
+
+    def scalars(self, eta: Mapping, ctx: Context) -> dict:
+        """Report ``tau`` [s]."""
+        return {('delay', 'tau'): lambda v: float(v.get(('delay', 'tau'), eta['tau']))}
+
+
+TERM = DelayTerm()

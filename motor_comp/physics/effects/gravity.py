@@ -11,12 +11,15 @@ only: on a linear axis (vertical or inclined) gravity is a constant and belongs 
 from __future__ import annotations
 
 import dataclasses
+import math
+from typing import Any, Mapping
 
 import numpy as np
 from numba import njit
 
 from motor_comp.errors import check_finite
 from motor_comp.physics.effects.base import AxisKind, Effect
+from motor_comp.physics.effects.identification import Column, Context, Term
 
 
 @njit(cache=True, inline='always', error_model='numpy')
@@ -74,3 +77,37 @@ class Gravity(Effect):
         Returns ``mgl = hypot(a, b) >= 0`` and ``q0 = atan2(−b, a)`` in (−π, π].
         """
         return Gravity(mgl=float(np.hypot(a, b)), q0=float(np.arctan2(-b, a)))
+
+
+class GravityTerm(Term):
+    """Identify gravity: ``A = mgl·cos q0`` on ``sin q``, ``B = −mgl·sin q0`` on ``cos q``."""
+
+    name = 'gravity'
+    effect = Gravity
+    force_scaled = (('gravity', 'mgl'),)
+
+    def columns(self, eta: Mapping, ctx: Context) -> list[Column]:
+        """Return the ``A`` and ``B`` columns."""
+        return [Column('A', ('sinq',), lambda p: np.sin(p.x)),
+                Column('B', ('cosq',), lambda p: np.cos(p.x))]
+
+    def encode(self, values: Mapping, eta: Mapping, ctx: Context) -> list[Effect]:
+        """Return the fitted gravity torque."""
+        a = float(values.get((self.name, 'A'), 0.0))
+        b = float(values.get((self.name, 'B'), 0.0))
+        return [Gravity(mgl=math.hypot(a, b), q0=math.atan2(-b, a))]
+
+    def decode(self, model: Any) -> tuple[dict, dict]:
+        """Return ``A`` and ``B``."""
+        e = model.get(self.name)
+        return {'A': e.mgl * math.cos(e.q0), 'B': -e.mgl * math.sin(e.q0)}, {}
+
+    def scalars(self, eta: Mapping, ctx: Context) -> dict:
+        """Report ``mgl`` [N·m] and ``q0`` [rad]."""
+        def g(v: Mapping, k: str) -> float:
+            return float(v.get(('gravity', k), 0.0))
+        return {('gravity', 'mgl'): lambda v: math.hypot(g(v, 'A'), g(v, 'B')),
+                ('gravity', 'q0'): lambda v: math.atan2(-g(v, 'B'), g(v, 'A'))}
+
+
+TERM = GravityTerm()

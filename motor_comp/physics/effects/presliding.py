@@ -43,6 +43,8 @@ from numba import njit
 
 from motor_comp.errors import ParameterError, check_nonnegative, check_positive
 from motor_comp.physics.effects.base import Effect
+from motor_comp.physics.effects.identification import Column, Context, Evidence, Param, \
+    Summary, Term
 from motor_comp.physics.effects.stribeck import stribeck_curve
 
 #: largest number of Maxwell-slip elements the compiled kernels carry
@@ -307,3 +309,192 @@ def upgrade_legacy_params(effects: Mapping[str, Any]) -> tuple[dict[str, Any], s
             f"{c * fc:g} N/s (Lampaert's constant attraction, rate C/|s(v)|); write "
             f"'C: {c * fc:g}' in the file to silence this")
     return out, note
+
+
+@njit(cache=True)
+def gms_unit_columns(x, inv_d, C, fs, vs, delta, dt):
+    """Force of unit-level Maxwell-slip elements along ``x`` [m], one column per element.
+
+    An element of slip limit ``β·s(v)/fc`` and stiffness ``β/d`` (pre-sliding distance
+    ``d`` [m]) gives exactly ``β`` times its column (``inv_d`` = ``1/d``), so with the
+    distances held the GMS force ``Σ β_j·g_j`` is linear in the element levels ``β_j``
+    (Lampaert 2003; Chiew eq. 3–5): their sum is the Coulomb level ``fc``,
+    ``α_j = β_j/fc``, ``k_j = β_j/d_j``.  ``fs`` is the break-away level per unit
+    Coulomb level (``1 + (fs − fc)/fc``) and ``C`` the attraction per unit level
+    (``C/fc``).  The elements share the displacement, the Stribeck curve and the slip
+    decay of each step, so one pass of the element law :func:`gms_step` gives every
+    column (with ``σ = 0`` each element's force after the step is its column).
+    """
+    n, m = x.shape[0], inv_d.shape[0]
+    out = np.zeros((n, m))
+    forces = np.zeros(m)
+    slip = np.zeros(m)
+    alpha = np.ones(m)
+    sigma = np.zeros(m)
+    for j in range(1, n):
+        dx = x[j] - x[j - 1]
+        v = dx / dt
+        s_v = stribeck_curve(v, 1.0, fs, vs, delta)
+        gms_step(forces, 0, slip, 0, alpha, 0, inv_d, 0, sigma, 0, m, C, dt, dx, v, s_v)
+        for e in range(m):
+            out[j, e] = forces[e]
+    return out
+
+
+#: the element distances of the family the search starts from, relative to its scale
+GMS_FAMILY = (0.3, 1.0, 3.0)
+#: most elements the structure search grows to
+GMS_MAX_ELEMENTS = 4
+
+
+class PreslidingTerm(Term):
+    """Identification of GMS pre-sliding: element levels on unit-element columns.
+
+    With the element distances ``d_j`` (pre-sliding displacement to break-away) and the
+    attraction held, the friction is linear in the element levels ``β_j ≥ 0`` (held
+    inside the estimator: a negative slip limit is no friction), whose sum is the
+    Coulomb level: the term carries the Coulomb (and Stribeck) columns.  The
+    distances are a vector parameter whose length is the element count: the search
+    starts from a family ``d0·(0.3, 1, 3)``, frees each distance, drops elements that
+    do not pay and grows a stiffer one where it does (at most four).  Declared bounds:
+    a distance is at least three encoder counts (or noise σ) — below the sensor's
+    resolution a pre-sliding curve is not observable and only mimics a stick or a gap
+    — and at most 1 m; and the longest element's curve must span samples: leaving a
+    reversal at the run's acceleration the axis covers ``½·a·(2·dt)²`` in two samples,
+    so a GMS whose longest distance is shorter is crossed within a sample or two and
+    fits how a stick ends between samples, not a curve.  The attraction ``C`` is free
+    only when a Stribeck curve makes it matter (with a constant level a slipping
+    element sits at its limit).  Its evidence is around reversals.
+    """
+
+    name = 'presliding'
+    effect = Presliding
+    evidence = Evidence.TURNS
+    requires = ('coulomb',)
+    replaces = ('coulomb', 'stribeck')
+    excludes = ('backlash',)
+    models_sticking = True
+    min_reversals = 4
+    params = ('d', 'c')
+    force_scaled = (('presliding', 'stiffness'),)
+    #: Σk is set by the first encoder counts after each reversal: looser than a delay's
+    #: or a gap's shape (0.19 relative SE on an independent run whose pre-sliding is half
+    #: of what a Coulomb + ripple model leaves)
+    shape = ('stiffness', 0.25)
+
+    def space(self, s: Summary, ctx: Context) -> tuple[Param, ...]:
+        """Return the element distances ``d`` [m] and the attraction ``c`` [1/s]."""
+        lo = max(3.0 * s.quantum, 3.0 * s.noise, 1e-9)
+        hi = max(0.01 * s.travel, 100 * lo)
+        grid = tuple(tuple(float(d0 * f) for f in GMS_FAMILY)
+                     for d0 in np.logspace(np.log10(lo), np.log10(hi), 6))
+        return (Param('d', lo, 1.0, grid=grid, log=True, vector=GMS_MAX_ELEMENTS,
+                      steps=tuple(np.log((0.6, 1.0, 1.6)))),
+                Param('c', 1.0, 1e6, grid=(300.0, 3000.0), log=True,
+                      steps=tuple(np.log((0.5, 1.0, 2.0)))))
+
+    def orders(self, s: Summary, eta: Mapping) -> tuple[int, int]:
+        """Return 1 to :data:`GMS_MAX_ELEMENTS` elements."""
+        return 1, GMS_MAX_ELEMENTS
+
+    def order_of(self, eta: Mapping) -> int:
+        """Return the element count."""
+        return len(eta['d'])
+
+    def grow(self, eta: Mapping) -> dict:
+        """Return ``eta`` with a stiffer element at a third of the shortest distance."""
+        d = tuple(eta['d'])
+        return dict(eta, d=(min(d) / 3.0,) + d)
+
+    def nonlinear(self, eta: Mapping) -> list:
+        """Return the distances, and ``c`` when a Stribeck curve makes it matter."""
+        out = [('d', j, float(v)) for j, v in enumerate(eta['d'])]
+        if float(eta.get('ratio', 0.0)) > 0.0:
+            out.append(('c', None, float(eta['c'])))
+        return out
+
+    def derive(self, eta: Mapping, base: Mapping) -> dict:
+        """Set the Stribeck ratio ``(fs − fc)/fc`` from the fit without pre-sliding."""
+        fc = max(float(base.get(('coulomb', 'fc'), 1.0)), 1e-6)
+        dfs = max(float(base.get(('stribeck', 'dfs'), 0.0)), 0.0)
+        return dict(eta, ratio=dfs / fc)
+
+    def _shape(self, eta: Mapping, ctx: Context) -> tuple[float, float, float]:
+        st = ctx.eta.get('stribeck') if 'stribeck' in ctx.present else None
+        if st is None:
+            return 0.0, 1e-3, 1.0
+        return float(eta.get('ratio', 0.0)), float(st['vs']), float(st['delta'])
+
+    def columns(self, eta: Mapping, ctx: Context) -> list[Column]:
+        """Return one unit-element column per distance (computed in one pass)."""
+        dists = tuple(float(d) for d in eta['d'])
+        c = float(eta['c'])
+        ratio, vs, dl = self._shape(eta, ctx)
+        inv = np.array([1.0 / d for d in dists])
+
+        def block(p: Any) -> np.ndarray:
+            return gms_unit_columns(np.ascontiguousarray(p.xg), inv, c, 1.0 + ratio, vs, dl,
+                                    p.dt)
+        return [Column(f'b{j}', ('gms', d, c, ratio, vs, dl), block, lo=0.0,
+                       width=len(dists), index=j) for j, d in enumerate(dists)]
+
+    def admissible(self, values: Mapping, eta: Mapping, s: Summary) -> str | None:
+        """Refuse a curve crossed within two samples at the run's acceleration."""
+        need = 2.0 * s.accel90 * s.dt * s.dt
+        if max(eta['d']) < need:
+            return (f'the longest pre-sliding distance {max(eta["d"]):.3g} is crossed within '
+                    f'two samples ({need:.3g} at the run\'s acceleration)')
+        return None
+
+    def encode(self, values: Mapping, eta: Mapping, ctx: Context) -> list[Effect]:
+        """Return Coulomb, pre-sliding (and Stribeck) effects of the element levels."""
+        from motor_comp.physics.effects.coulomb import Coulomb
+        from motor_comp.physics.effects.stribeck import Stribeck
+        dists, c = eta['d'], float(eta['c'])
+        beta = [max(float(values.get((self.name, f'b{j}'), 0.0)), 0.0)
+                for j in range(len(dists))]
+        keep = [j for j in range(len(dists)) if beta[j] > 1e-9 * max(sum(beta), 1e-300)]
+        if not keep:
+            keep = [int(np.argmax(beta))]
+            beta[keep[0]] = 1e-9
+        fc = sum(beta[j] for j in keep)
+        out: list[Effect] = [Coulomb(fc=fc), Presliding(
+            alpha=tuple(beta[j] / fc for j in keep),
+            k=tuple(max(beta[j], 1e-12) / dists[j] for j in keep), C=c * max(fc, 1e-9))]
+        ratio, vs, dl = self._shape(eta, ctx)
+        if 'stribeck' in ctx.present:
+            out.append(Stribeck(fs=fc * (1.0 + ratio), vs=vs, delta=dl))
+        return out
+
+    def decode(self, model: Any) -> tuple[dict, dict]:
+        """Return the element levels and ``(d, c, ratio)`` of the model's GMS."""
+        e = model.get(self.name)
+        fc = max(model.fc, 1e-6)
+        ratio = (model.stribeck_curve_params()[1] - fc) / fc
+        dists = tuple(a * fc / k for a, k in zip(e.alpha, e.k))
+        return ({f'b{j}': a * model.fc for j, a in enumerate(e.alpha)},
+                {'d': dists, 'c': e.C / fc, 'ratio': ratio})
+
+    def scalars(self, eta: Mapping, ctx: Context) -> dict:
+        """Report ``fc`` (Σβ), ``fs``, the stiffness Σk [N/m], ``c`` and the elements."""
+        dists = tuple(eta['d'])
+        nd = len(dists)
+        ratio, _, _ = self._shape(eta, ctx)
+
+        def b(v: Mapping, j: int) -> float:
+            return float(v.get((self.name, f'b{j}'), 0.0))
+
+        def fc(v: Mapping) -> float:
+            return sum(b(v, j) for j in range(nd))
+        out = {('coulomb', 'fc'): fc}
+        if 'stribeck' in ctx.present:
+            out[('stribeck', 'fs')] = lambda v: fc(v) * (1.0 + ratio)
+        out[(self.name, 'stiffness')] = lambda v: sum(
+            max(b(v, j), 0.0) / float(v.get((self.name, f'd{j}'), dists[j]))
+            for j in range(nd))
+        out[(self.name, 'c')] = lambda v: float(v.get((self.name, 'c'), eta['c']))
+        out[(self.name, 'elements')] = lambda v: float(sum(b(v, j) > 0 for j in range(nd)))
+        return out
+
+
+TERM = PreslidingTerm()

@@ -5,12 +5,15 @@
 from __future__ import annotations
 
 import dataclasses
+import math
+from typing import Any, Mapping
 
 import numpy as np
 from numba import njit
 
 from motor_comp.errors import ParameterError, check_finite, check_positive
 from motor_comp.physics.effects.base import Effect
+from motor_comp.physics.effects.identification import Column, Context, Param, Summary, Term
 
 #: largest number of harmonics the compiled kernels carry
 MAX_HARMONICS = 16
@@ -107,3 +110,187 @@ class Ripple(Effect):
         for h in range(1, len(self.harmonics) + 1):
             cols += [np.sin(h * w * x), np.cos(h * w * x)]
         return np.stack(cols, axis=1)
+
+
+@dataclasses.dataclass(frozen=True)
+class SpatialSpectrum:
+    """Amplitude spectrum of a force against position.
+
+    Parameters
+    ----------
+    frequency : ndarray
+        Spatial frequency [cycles/m] (or cycles/rad for a rotary axis).
+    amplitude : ndarray
+        Amplitude [N] of the sinusoid at each frequency.
+    bin_width : float
+        Position grid step [m].
+    span : float
+        Position range covered [m].
+    """
+
+    frequency: np.ndarray
+    amplitude: np.ndarray
+    bin_width: float
+    span: float
+
+    def peak_period(self, *, min_period: float, max_period: float) -> float:
+        """Return the period [m] of the largest peak within the allowed range."""
+        f = self.frequency
+        ok = (f >= 1.0 / max_period) & (f <= 1.0 / min_period)
+        if not np.any(ok):
+            return float('nan')
+        i = np.flatnonzero(ok)[np.argmax(self.amplitude[ok])]
+        return 1.0 / float(f[i])
+
+    def amplitude_at(self, freq: float) -> float:
+        """Return the largest amplitude [N] within one resolution bin of ``freq``."""
+        df = 1.0 / self.span
+        m = np.abs(self.frequency - freq) <= df
+        return float(np.max(self.amplitude[m])) if np.any(m) else 0.0
+
+
+def spatial_spectrum(x: np.ndarray, r: np.ndarray, *, n_bins: int | None = None) \
+        -> SpatialSpectrum:
+    """Return the spectrum of ``r`` against position ``x`` (binned means, padded FFT).
+
+    The axis travels the same positions many times at different speeds; averaging the
+    residual in position bins keeps what is periodic in position and averages out what
+    is not, and a uniform position grid makes the FFT applicable (the samples
+    themselves are uniform in time, not in position).
+    """
+    x = np.asarray(x, dtype=float)
+    lo, hi = float(np.min(x)), float(np.max(x))
+    span = hi - lo
+    if n_bins is None:
+        n_bins = int(np.clip(len(x) // 8, 64, 8192))
+    width = span / n_bins if span > 0 else 1.0
+    idx = np.clip(((x - lo) / width).astype(int), 0, n_bins - 1)
+    counts = np.bincount(idx, minlength=n_bins)
+    sums = np.bincount(idx, weights=r, minlength=n_bins)
+    filled = counts > 0
+    centers = lo + (np.arange(n_bins) + 0.5) * width
+    prof = np.interp(centers, centers[filled], sums[filled] / counts[filled])
+    prof = prof - np.polyval(np.polyfit(centers, prof, 1), centers)
+    nfft = 1 << int(math.ceil(math.log2(4 * n_bins)))
+    win = np.hanning(n_bins)
+    spec = np.fft.rfft(prof * win, nfft)
+    # amplitude of a sinusoid: 2|X|/Σw for a Hann window
+    amp = 2.0 * np.abs(spec) / np.sum(win)
+    freq = np.fft.rfftfreq(nfft, width)
+    return SpatialSpectrum(frequency=freq, amplitude=amp, bin_width=width, span=span)
+
+
+#: the largest number of harmonics identified
+MAX_FIT_HARMONICS = 6
+
+
+class RippleTerm(Term):
+    """Identification of force ripple: harmonics on ``sin/cos(h·2πx/period)``.
+
+    The period starts at the largest peak of the residual's spatial spectrum between
+    eight position bins (or four samples per period at the high speeds) and a third of
+    the travel (at least three periods seen), and is refined by variable projection
+    within ``±1.5·p²/span`` (the spectrum's resolution); the harmonic count (the
+    term's order, 1–6, at least four samples per period at the median speed) by an
+    information criterion.  Each column is position-periodic: the workbench averages
+    it over the acceleration stencil's kernel.
+    """
+
+    name = 'ripple'
+    effect = Ripple
+    params = ('period',)
+    force_scaled = (('ripple', 'amplitude_1'),)
+
+    def _min_period(self, s: Summary, n_bins: float = 8192.0) -> float:
+        return max(8.0 * s.travel / n_bins, 4.0 * s.dt * float(s.speeds[90]), 1e-12)
+
+    def space(self, s: Summary, ctx: Context) -> tuple[Param, ...]:
+        """Return ``period`` [m] (no grid: the start comes from the spectrum)."""
+        hi = max(s.travel / 3.0, 2.0 * self._min_period(s))
+        return (Param('period', self._min_period(s), hi),)
+
+    def bracket(self, value: float, s: Summary) -> tuple[float, float]:
+        """Return the local search interval around a period: the spectrum's resolution."""
+        dp = 1.5 * value * value / max(s.travel, 1e-12)
+        return max(value - dp, 0.5 * value), value + dp
+
+    def fold_steps(self, value: float, s: Summary) -> tuple[float, ...]:
+        """Return the periods tried inside each validation fold around the all-data one."""
+        dp = 1.5 * value * value / max(s.travel, 1e-12)
+        return tuple(value + k * dp for k in (-0.5, -0.25, 0.0, 0.25, 0.5))
+
+    def orders(self, s: Summary, eta: Mapping) -> tuple[int, int]:
+        """Return the harmonic counts allowed at the period (four samples per period)."""
+        min_p = max(4.0 * s.dt * float(s.speeds[50]), 1e-12)
+        return 1, max(1, min(MAX_FIT_HARMONICS, int(math.floor(float(eta['period']) / min_p))))
+
+    def order_of(self, eta: Mapping) -> int:
+        """Return the harmonic count."""
+        return int(eta.get('harmonics', 1))
+
+    def with_order(self, eta: Mapping, order: int) -> dict:
+        """Return ``eta`` with ``order`` harmonics."""
+        return dict(eta, harmonics=int(order))
+
+    def initial(self, s: Summary, ctx: Context, profile: Any) -> list[dict]:
+        """Return the spectrum's largest peak and its visible harmonics as the start."""
+        x, r = profile
+        spec = spatial_spectrum(x, r)
+        min_p = max(8 * spec.bin_width, 4.0 * s.dt * float(s.speeds[90]))
+        max_p = spec.span / 3.0
+        f, amp = spec.frequency, spec.amplitude
+        ok = (f >= 1.0 / max_p) & (f <= 1.0 / min_p) if max_p > min_p else f < 0
+        if not np.any(ok):
+            return [{'period': max(max_p, 1e-6), 'harmonics': 1}]
+        i = np.flatnonzero(ok)[np.argmax(amp[ok])]
+        p0 = 1.0 / float(f[i])
+        a1 = spec.amplitude_at(1.0 / p0)
+        floor = float(np.median(amp))
+        nh = 1
+        for h in range(2, MAX_FIT_HARMONICS + 1):
+            if h / p0 > 1.0 / min_p:
+                break
+            ah = spec.amplitude_at(h / p0)
+            if ah > 0.15 * a1 and ah > 4 * floor:
+                nh = h
+        return [{'period': p0, 'harmonics': nh}]
+
+    def columns(self, eta: Mapping, ctx: Context) -> list[Column]:
+        """Return ``a_h``/``b_h`` on ``sin``/``cos(h·ω·x)``, h = 1…harmonics."""
+        period, nh = float(eta['period']), int(eta.get('harmonics', 1))
+        cols = []
+        for h in range(1, nh + 1):
+            w = 2 * math.pi * h / period
+            cols.append(Column(f'a{h}', ('sin', w), lambda p, w=w: np.sin(w * p.x),
+                               frequency=w))
+            cols.append(Column(f'b{h}', ('cos', w), lambda p, w=w: np.cos(w * p.x),
+                               frequency=w))
+        return cols
+
+    def encode(self, values: Mapping, eta: Mapping, ctx: Context) -> list[Effect]:
+        """Return the fitted ripple."""
+        nh = int(eta.get('harmonics', 1))
+        harm = [[float(values.get((self.name, f'a{h}'), 0.0)),
+                 float(values.get((self.name, f'b{h}'), 0.0))] for h in range(1, nh + 1)]
+        return [Ripple(period=float(eta['period']), harmonics=harm)]
+
+    def decode(self, model: Any) -> tuple[dict, dict]:
+        """Return the harmonics' coefficients and ``(period, harmonics)``."""
+        e = model.get(self.name)
+        coef = {}
+        for h, (a, b) in enumerate(e.harmonics, start=1):
+            coef[f'a{h}'], coef[f'b{h}'] = a, b
+        return coef, {'period': e.period, 'harmonics': len(e.harmonics)}
+
+    def scalars(self, eta: Mapping, ctx: Context) -> dict:
+        """Report ``period`` [m] and each harmonic's amplitude [N]."""
+        out = {('ripple', 'period'):
+               lambda v: float(v.get(('ripple', 'period'), eta['period']))}
+        for h in range(1, int(eta.get('harmonics', 1)) + 1):
+            out[('ripple', f'amplitude_{h}')] = (
+                lambda v, h=h: math.hypot(float(v.get(('ripple', f'a{h}'), 0.0)),
+                                          float(v.get(('ripple', f'b{h}'), 0.0))))
+        return out
+
+
+TERM = RippleTerm()

@@ -8,12 +8,16 @@ used by the GMS model (Lampaert 2003) is :func:`stribeck_curve`.
 from __future__ import annotations
 
 import dataclasses
+import math
+from typing import Any, Mapping
 
 import numpy as np
 from numba import njit
 
 from motor_comp.errors import ParameterError, check_nonnegative, check_positive
 from motor_comp.physics.effects.base import Effect
+from motor_comp.physics.effects.identification import Column, Context, Evidence, Param, \
+    Summary, Term
 
 
 @njit(cache=True, inline='always', error_model='numpy')
@@ -100,3 +104,60 @@ class Stribeck(Effect):
         """Column whose coefficient is ``fs − fc`` for the current ``vs``, ``delta``."""
         v = np.asarray(v, dtype=float)
         return (stribeck_shape(v * (1.0 / self.vs), self.delta) * np.sign(v))[:, None]
+
+
+class StribeckTerm(Term):
+    """Identification of the Stribeck rise: ``fs − fc ≥ 0`` on the shaped signed share.
+
+    ``vs`` is searched inside the speeds seen, up to a tenth of the high ones (a larger
+    ``vs`` stretches the hump over the whole speed range, where it copies a negative
+    viscous term instead of describing low-speed friction), ``δ`` over 0.3–5; both on
+    their logarithms.  ``fs ≥ fc`` holds inside the estimator.
+    """
+
+    name = 'stribeck'
+    effect = Stribeck
+    requires = ('coulomb',)
+    #: it acts while the axis slides slowly: around the turns
+    evidence = Evidence.SLIDING | Evidence.TURNS
+    dry_friction = True
+    params = ('vs', 'delta')
+    force_scaled = (('stribeck', 'fs'),)
+
+    def space(self, s: Summary, ctx: Context) -> tuple[Param, ...]:
+        """Return ``vs`` [m/s] and ``delta`` [-]."""
+        lo = max(float(s.speeds[1]), 1e-7)
+        hi = max(0.1 * float(s.speeds[95]), 2 * lo)
+        grid = tuple(float(v) for v in np.exp(np.linspace(np.log(lo), np.log(hi), 8)))
+        return (Param('vs', math.exp(-16.0), hi, grid=grid, log=True,
+                      steps=tuple(np.log((0.7, 1.0, 1.4)))),
+                Param('delta', 0.3, 5.0, grid=(0.5, 1.0, 2.0), log=True,
+                      steps=tuple(np.log((0.8, 1.0, 1.25)))))
+
+    def columns(self, eta: Mapping, ctx: Context) -> list[Column]:
+        """Return the ``dfs = fs − fc`` column."""
+        vs, dl = float(eta['vs']), float(eta['delta'])
+        return [Column('dfs', ('stribeck_shares', vs, dl),
+                       lambda p: stribeck_shape(p.v / vs, dl) * (p.fwd - p.bwd), lo=0.0)]
+
+    def encode(self, values: Mapping, eta: Mapping, ctx: Context) -> list[Effect]:
+        """Return the fitted Stribeck effect (``fs = fc + dfs``)."""
+        fc = max(float(values.get(('coulomb', 'fc'), 0.0)), 0.0)
+        dfs = max(float(values.get((self.name, 'dfs'), 0.0)), 0.0)
+        return [Stribeck(fs=fc + dfs, vs=float(eta['vs']), delta=float(eta['delta']))]
+
+    def decode(self, model: Any) -> tuple[dict, dict]:
+        """Return ``dfs = fs − fc`` and ``(vs, delta)``."""
+        e = model.get(self.name)
+        return {'dfs': e.fs - model.fc}, {'vs': e.vs, 'delta': e.delta}
+
+    def scalars(self, eta: Mapping, ctx: Context) -> dict:
+        """Report ``fs`` [N], ``vs`` [m/s], ``delta``."""
+        def g(v: Mapping, k: tuple, d: float = 0.0) -> float:
+            return float(v.get(k, d))
+        return {('stribeck', 'fs'): lambda v: g(v, ('coulomb', 'fc')) + g(v, ('stribeck', 'dfs')),
+                ('stribeck', 'vs'): lambda v: g(v, ('stribeck', 'vs'), eta['vs']),
+                ('stribeck', 'delta'): lambda v: g(v, ('stribeck', 'delta'), eta['delta'])}
+
+
+TERM = StribeckTerm()

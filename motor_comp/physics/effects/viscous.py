@@ -2,12 +2,14 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import Any, Mapping
 
 import numpy as np
 from numba import njit
 
 from motor_comp.errors import check_nonnegative
 from motor_comp.physics.effects.base import Effect
+from motor_comp.physics.effects.identification import Column, Context, Signal, Term
 
 
 @njit(cache=True)
@@ -40,3 +42,30 @@ class Viscous(Effect):
     def regressors(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Columns whose coefficients are ``[fv]``."""
         return np.asarray(v, dtype=float)[:, None]
+
+
+class ViscousTerm(Term):
+    """Identification of viscous friction: ``fv ≥ 0`` on the velocity the stencil sees."""
+
+    name = 'viscous'
+    effect = Viscous
+    force_scaled = (('viscous', 'fv'),)
+
+    def columns(self, eta: Mapping, ctx: Context) -> list[Column]:
+        """Return the ``fv`` column (the processed velocity)."""
+        return [Column('fv', ('vl',), signal=Signal.VELOCITY, lo=0.0)]
+
+    def encode(self, values: Mapping, eta: Mapping, ctx: Context) -> list[Effect]:
+        """Return the fitted viscous effect."""
+        return [Viscous(fv=max(float(values.get((self.name, 'fv'), 0.0)), 0.0))]
+
+    def decode(self, model: Any) -> tuple[dict, dict]:
+        """Return ``fv``."""
+        return {'fv': model.get(self.name).fv}, {}
+
+    def scalars(self, eta: Mapping, ctx: Context) -> dict:
+        """Report ``fv`` [N·s/m]."""
+        return {('viscous', 'fv'): lambda v: float(v.get(('viscous', 'fv'), 0.0))}
+
+
+TERM = ViscousTerm()

@@ -1,0 +1,539 @@
+"""One identification experiment as an immutable dataset, and its views.
+
+A :class:`Dataset` is one or several runs (one experiment, one model), processed once
+(:mod:`.processing`): the fitted samples of each run, cut into short blocks dealt to
+validation folds round-robin, so every fold covers every regime of a time-ordered
+experiment (a slow→fast sweep included); training leaves out one smoother half-width
+next to each held-out block (hv-block cross-validation, Racine 2000;
+``../shared/IDENTIFICATION.md`` §4).  Nothing in it changes after construction.
+
+What depends on a model — the motor motion reconstructed across a backlash gap (it
+follows the model's own dynamics), the drive force delayed by a dead time, rows
+weighted by speed band — is a :class:`View`, ``dataset.at(width=, tau=, model=,
+weights=)``.  Views are cheap and immutable; the smoothed columns, motions and Gram
+entries they compute are cached on the dataset under keys naming everything they
+depend on, so a search that returns to a view finds its columns again and no caller
+ever re-synchronises anything.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+from typing import Any, Sequence
+
+import numpy as np
+
+from motor_comp.errors import ParameterError
+from motor_comp.physics.axis import AxisModel
+from motor_comp.physics.effects.identification import Column, Signal, Summary
+from motor_comp.workbench import processing as proc
+from motor_comp.workbench.derivatives import InputHold, Kinematics
+from motor_comp.workbench.motion import motor_position
+from motor_comp.workbench.turns import REVERSAL_HALF, reversal_shares
+
+#: least share of the sliding samples in the minority direction for the runs to count as
+#: moving both ways: below it the backward samples are jitter of a one-way run
+MIN_DIRECTION_SHARE = 0.05
+#: memory for cached smoothed columns of one dataset [bytes]
+COLUMN_CACHE_BYTES = 256 * 2**20
+
+
+@dataclasses.dataclass(frozen=True)
+class RunPart:
+    """One processed run: its kinematics, fitted rows and smoother length."""
+
+    kin: Kinematics
+    rows: np.ndarray
+    W: int
+
+
+class Motion:
+    """The pointwise signals of one run along one motor motion (lazily computed once)."""
+
+    def __init__(self, part: RunPart, position: np.ndarray, measured: bool) -> None:
+        self.part = part
+        self.position = position
+        self._measured = measured
+        self._cache: dict[str, Any] = {}
+
+    def _get(self, name: str) -> Any:
+        hit = self._cache.get(name)
+        if hit is None:
+            kin = self.part.kin
+            if name == 'x':
+                hit = kin.x if self._measured else proc.point_position(kin, self.position)
+            elif name == 'v':
+                hit = proc.point_velocity(kin, self.position)
+            elif name == 'xg':
+                hit = proc.gms_position(kin, self.position)
+            elif name == 'shares':
+                half = max(3, int(round(REVERSAL_HALF * kin.window)))
+                eps = max(kin.quantum(), kin.noise_std())
+                hit = reversal_shares(np.asarray(self.position, dtype=float), self._get('v'),
+                                      half, eps, spread=kin.hold is not InputHold.SAMPLE)
+            self._cache[name] = hit
+        return hit
+
+    @property
+    def x(self) -> np.ndarray:
+        """Pointwise position [m or rad]."""
+        return self._get('x')
+
+    @property
+    def v(self) -> np.ndarray:
+        """Pointwise velocity [m/s or rad/s]."""
+        return self._get('v')
+
+    @property
+    def xg(self) -> np.ndarray:
+        """Position the GMS elements are driven by."""
+        return self._get('xg')
+
+    @property
+    def shares(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Forward, backward and stuck shares of each sample (the turn model)."""
+        return self._get('shares')
+
+
+class PathView:
+    """A run's signals as a term's columns see them (:class:`~…identification.Path`)."""
+
+    def __init__(self, motion: Motion, f_in: Any, direction: int) -> None:
+        self._m = motion
+        self._f_in = f_in
+        self.position = motion.position
+        self.dt = motion.part.kin.dt
+        self.direction = direction
+
+    x = property(lambda self: self._m.x)
+    v = property(lambda self: self._m.v)
+    xg = property(lambda self: self._m.xg)
+    fwd = property(lambda self: self._m.shares[0])
+    bwd = property(lambda self: self._m.shares[1])
+    stuck = property(lambda self: self._m.shares[2])
+    f_in = property(lambda self: self._f_in(self._m))
+
+
+@dataclasses.dataclass(frozen=True)
+class SpeedWeights:
+    """Row weights by speed band: ``edges[i] ≤ |ẋ| < edges[i+1]`` gets ``w[i]`` (> 0)."""
+
+    edges: tuple
+    w: tuple
+
+    def __post_init__(self) -> None:
+        w = np.asarray(self.w, dtype=float)
+        if len(w) != len(self.edges) or not np.all(np.isfinite(w)) or np.any(w <= 0):
+            raise ParameterError('speed weights must be finite and positive, one per band')
+
+
+def model_signature(model: AxisModel | None) -> str:
+    """Return a short key of a model's parameters (what a reconstructed motion depends on)."""
+    if model is None:
+        return ''
+    text = json.dumps(model.to_dict(), sort_keys=True, default=str)
+    return hashlib.blake2b(text.encode(), digest_size=8).hexdigest()
+
+
+class Dataset:
+    """One identification experiment: the fitted samples of one or more runs.
+
+    Parameters
+    ----------
+    kins : sequence of Kinematics
+        The runs (one experiment, one model).
+    model : AxisModel
+        Supplies the drive constants (``input_gain``, ``back_emf``, ``damping``).
+    folds : int
+        Number of folds the blocks are dealt to (round-robin).
+    processing : Processing
+        The processing choices (smoother length).
+    block_s : float, optional
+        Block length [s]; default from the record length (0.25–2 s).
+    masks : sequence of ndarray of bool, optional
+        The fitted samples of each run (another dataset's ``masks`` on the same time
+        grid), instead of selecting them here.
+    """
+
+    def __init__(self, kins: Sequence[Kinematics], model: AxisModel, *, folds: int = 5,
+                 processing: proc.Processing = proc.Processing(),
+                 block_s: float | None = None,
+                 masks: Sequence[np.ndarray] | None = None) -> None:
+        if folds < 2:
+            raise ParameterError(f'folds must be >= 2, got {folds}')
+        self.kins = list(kins)
+        self.model = model
+        self.folds = int(folds)
+        self.processing = processing
+        self.parts: list[RunPart] = []
+        self.masks: list[np.ndarray] = []
+        total = sum(k.duration for k in self.kins)
+        if block_s is None:
+            block_s = float(np.clip(total / (10.0 * folds), 0.25, 2.0))
+        run_id, blk, head_tail = [], [], []
+        nblk = 0
+        n_full = 0.0
+        for i, kin in enumerate(self.kins):
+            W = processing.window(kin)
+            mask = processing.rows(kin, W) if masks is None else np.asarray(masks[i], bool)
+            self.masks.append(mask)
+            step = processing.step(W)
+            keep = np.zeros(len(kin), dtype=bool)
+            keep[::step] = True
+            rows = np.flatnonzero(mask & keep)
+            self.parts.append(RunPart(kin, rows, W))
+            # independent samples: Σb² of the normalised kernel per sample
+            n_full += len(rows) * step * float(np.sum(proc.kernel(W) ** 2))
+            t = kin.t[rows] - kin.t[0]
+            b = np.floor(t / block_s).astype(int)
+            half = 0.5 * W * kin.dt
+            b_lo, b_hi = b * block_s, (b + 1) * block_s
+            head_tail.append(np.where(t - b_lo < half, 0, np.where(b_hi - t <= half, 2, 1)))
+            blk.append(b + nblk)
+            nblk += int(b.max()) + 1 if len(b) else 0
+            run_id.append(np.full(len(rows), i))
+        self.run_id = np.concatenate(run_id)
+        block = np.concatenate(blk)
+        ht = np.concatenate(head_tail)
+        if len(block) == 0:
+            raise ParameterError('no sliding samples in the run(s): the axis does not move')
+        _, block = np.unique(block, return_inverse=True)
+        self.block = block
+        self.n_blocks = int(block.max()) + 1
+        self.block_fold = np.arange(self.n_blocks) % self.folds
+        self.fold = self.block_fold[block]
+        part_key = block * 3 + ht
+        change = np.flatnonzero(np.diff(part_key)) + 1
+        self.starts = np.concatenate([[0], change])
+        part_block = block[self.starts]
+        part_pos = ht[self.starts]
+        self.n = len(block)
+        self._train_parts, self._test_parts = [], []
+        prev_f = np.roll(self.block_fold, 1)[part_block]
+        next_f = np.roll(self.block_fold, -1)[part_block]
+        for f in range(self.folds):
+            tr = self.block_fold[part_block] != f
+            # hv gap: a training block's edge next to a held-out block is left out
+            tr &= ~((part_pos == 0) & (prev_f == f) & (part_block > 0))
+            tr &= ~((part_pos == 2) & (next_f == f) & (part_block < self.n_blocks - 1))
+            self._train_parts.append(tr)
+            self._test_parts.append(self.block_fold[part_block] == f)
+        self.n_eff = max(n_full, 2.0)
+        ends = np.append(self.starts[1:], self.n)
+        self._part_bounds = list(zip(self.starts.tolist(), ends.tolist()))
+        self._cache: dict = {}
+        self._cache_max = max(400, COLUMN_CACHE_BYTES // (8 * max(self.n, 1)))
+        self._gram: dict = {}
+        self._row_sets: dict = {}
+        self._motions: dict = {}
+        self._views: dict = {}
+        base = self.at()
+        v = np.concatenate([np.asarray(m.v)[p.rows] for p, m in
+                            zip(self.parts, base.motions)])
+        n_pos, n_neg = int(np.count_nonzero(v > 0)), int(np.count_nonzero(v < 0))
+        #: share of the fitted samples in the less frequent direction (0–0.5)
+        self.minority_share = min(n_pos, n_neg) / max(n_pos + n_neg, 1)
+        #: +1/−1 when the runs slide one way only, else 0
+        self.direction = (0 if self.minority_share >= MIN_DIRECTION_SHARE
+                          else (1 if n_pos >= n_neg else -1))
+        self.window = max(p.W for p in self.parts)
+        y0 = base.y()
+        #: NRMSE denominator: Σ(F_in − mean)² over the rows, without delay (one per run set)
+        self.den = float(np.sum((y0 - y0.mean()) ** 2))
+        self.summary = self._summary(base)
+
+    # -- structure ------------------------------------------------------------------
+    def _summary(self, base: 'View') -> Summary:
+        speed = np.abs(base.gather(lambda p, m: m.v))
+        acc = np.abs(base.signal(Signal.ACCELERATION))
+        x = base.gather(lambda p, m: m.x)
+        kin = self.kins[0]
+        n_rev = int(sum(np.count_nonzero(np.diff(np.sign(p.kin.v[p.rows])) != 0)
+                        for p in self.parts))
+        pct = (1, 10, 50, 90, 95)
+        return Summary(dt=max(k.dt for k in self.kins),
+                       duration=min(k.duration for k in self.kins), quantum=kin.quantum(),
+                       noise=kin.noise_std(), span=(float(x.min()), float(x.max())),
+                       speeds=dict(zip(pct, (float(q) for q in np.percentile(speed, pct)))),
+                       accel90=float(np.percentile(acc, 90)), reversals=n_rev,
+                       direction=int(self.direction),
+                       rotary=bool(self.model.units.rotary))
+
+    def at(self, *, width: float = 0.0, tau: float = 0.0, model: AxisModel | None = None,
+           weights: SpeedWeights | None = None) -> 'View':
+        """Return the view of the data with a backlash ``width`` [m], a delay ``tau`` [s].
+
+        ``model`` is the model whose dynamics carry the motor across the gap (only
+        used with ``width > 0``); ``weights`` weight the rows by speed band.
+        """
+        width, tau = float(width), float(tau)
+        mkey: tuple = (0,) if width <= 0 else (
+            'gap', width, tau, model_signature(model.without('backlash', 'delay')
+                                               if model is not None else None))
+        key = (mkey, tau, weights)
+        v = self._views.get(key)
+        if v is None:
+            if len(self._views) > 256:
+                self._views.clear()
+            v = self._views[key] = View(self, width, tau, model, weights, mkey)
+        return v
+
+    def motions(self, width: float, tau: float, model: AxisModel | None,
+                mkey: tuple) -> list[Motion]:
+        """Return each run's motion (measured, or the motor's across a gap), cached."""
+        hit = self._motions.get(mkey)
+        if hit is not None:
+            return hit
+        out = []
+        for p in self.parts:
+            if width <= 0:
+                out.append(Motion(p, p.kin.position, True))
+                continue
+            # the flight sees the logged command delayed by τ at the integrator's sub-step
+            base = (model or self.model).without('backlash', 'delay')
+            xm = motor_position(p.kin, width, base, p.kin.u, tau=tau)
+            out.append(Motion(p, xm, False))
+        if len(self._motions) > 64:
+            self._motions.clear()
+        self._motions[mkey] = out
+        return out
+
+    # -- folds ------------------------------------------------------------------------
+    def part_grams(self, Z: np.ndarray) -> np.ndarray:
+        """Return the per-part ``ZᵀZ``: shape (parts, q, q)."""
+        out = np.empty((len(self._part_bounds), Z.shape[1], Z.shape[1]))
+        for i, (a, b) in enumerate(self._part_bounds):
+            np.matmul(Z[a:b].T, Z[a:b], out=out[i])
+        return out
+
+    @property
+    def train_parts(self) -> list[np.ndarray]:
+        """Part masks of each fold's training set."""
+        return self._train_parts
+
+    @property
+    def test_parts(self) -> list[np.ndarray]:
+        """Part masks of each fold's held-out set."""
+        return self._test_parts
+
+    def train_rows(self, f: int) -> np.ndarray:
+        """Return the boolean row mask of fold ``f``'s training samples."""
+        part_of_row = np.repeat(np.arange(len(self.starts)),
+                                np.diff(np.append(self.starts, self.n)))
+        return self._train_parts[f][part_of_row]
+
+    def rows_id(self, rows: np.ndarray | None) -> int:
+        """Return a small number naming a row subset (None: all rows) for the Gram cache."""
+        if rows is None:
+            return -1
+        sig = np.packbits(rows).tobytes()
+        rid = self._row_sets.get(sig)
+        if rid is None:
+            if len(self._row_sets) > 64:
+                self._row_sets.clear()
+                self._gram.clear()
+            rid = self._row_sets[sig] = len(self._row_sets)
+        return rid
+
+    def cached(self, key: tuple, make: Any) -> np.ndarray:
+        """Return the cached array under ``key``, computing it with ``make()`` once."""
+        hit = self._cache.get(key)
+        if hit is None:
+            if len(self._cache) > self._cache_max:
+                self._cache.clear()
+            hit = self._cache[key] = make()
+        return hit
+
+    def gram(self, cols: Sequence[np.ndarray], keys: Sequence[tuple | None],
+             rows: np.ndarray | None = None) -> np.ndarray:
+        """Return ``ZᵀZ`` of ``cols`` over ``rows``, reusing cached entries by column key.
+
+        Variable projection re-solves the same design with one group of columns
+        changed per trial: the products among the unchanged columns are computed once,
+        the trial columns' products at each trial (O(n·k·p) instead of O(n·p²)).
+        """
+        q = len(cols)
+        rid = self.rows_id(rows)
+        G = np.empty((q, q))
+        missing = []
+        for i in range(q):
+            ki = keys[i]
+            if ki is None:
+                missing.append(i)
+                continue
+            for j in range(i + 1):
+                kj = keys[j]
+                v = None if kj is None else self._gram.get((rid, ki, kj))
+                if v is None:
+                    missing.append(i)
+                    break
+                G[i, j] = G[j, i] = v
+        if missing:
+            Z = np.stack(cols, axis=1)
+            if rows is not None:
+                Z = Z[rows]
+            M = Z[:, missing].T @ Z
+            if len(self._gram) > 200_000:
+                self._gram.clear()
+            for a, i in enumerate(missing):
+                G[i, :] = M[a]
+                G[:, i] = M[a]
+                ki = keys[i]
+                if ki is None:
+                    continue
+                for j in range(q):
+                    kj = keys[j]
+                    if kj is not None:
+                        self._gram[(rid, ki, kj)] = self._gram[(rid, kj, ki)] = M[a, j]
+        return G
+
+
+class View:
+    """The dataset seen with a backlash gap, a dead time and row weights (immutable).
+
+    Built by :meth:`Dataset.at`; every array it returns is at the dataset's rows.
+    """
+
+    def __init__(self, data: Dataset, width: float, tau: float, model: AxisModel | None,
+                 weights: SpeedWeights | None, mkey: tuple) -> None:
+        self.data = data
+        self.width = width
+        self.tau = tau
+        self.model = model
+        self.weights = weights
+        self.mkey = mkey
+        self.wkey = (weights.edges, weights.w) if weights is not None else None
+        self._motions: list[Motion] | None = None
+        self._sw: np.ndarray | None = None
+
+    @property
+    def motions(self) -> list[Motion]:
+        """Each run's motion in this view."""
+        if self._motions is None:
+            self._motions = self.data.motions(self.width, self.tau, self.model, self.mkey)
+        return self._motions
+
+    def paths(self) -> list[PathView]:
+        """Return each run's :class:`PathView` (the signals a term's columns use)."""
+        m = self.data.model
+        k = m.input_gain * m.back_emf + m.damping
+        tau = self.tau
+
+        def f_in(motion: Motion) -> np.ndarray:
+            return m.input_gain * motion.part.kin.input_at(tau) - k * motion.v
+        return [PathView(mo, f_in, self.data.direction) for mo in self.motions]
+
+    def gather(self, fn: Any) -> np.ndarray:
+        """Concatenate ``fn(part, motion)[rows]`` over the runs (full-rate arrays)."""
+        return np.concatenate([np.asarray(fn(p, mo))[p.rows]
+                               for p, mo in zip(self.data.parts, self.motions)])
+
+    def key(self, key: tuple, *, uses_input: bool = False) -> tuple:
+        """Return the cache key of a column in this view."""
+        return key + (self.mkey, self.tau if uses_input else None, self.wkey)
+
+    @property
+    def sw(self) -> np.ndarray | None:
+        """Return the √weight of each row (None: unweighted)."""
+        if self.weights is None:
+            return None
+        if self._sw is None:
+            edges = np.asarray(self.weights.edges, dtype=float)
+            w = np.asarray(self.weights.w, dtype=float)
+            vl = self.data.at(width=self.width, tau=self.tau, model=self.model)\
+                .signal(Signal.VELOCITY)
+            band = np.clip(np.searchsorted(edges, np.abs(vl), side='right') - 1, 0, len(w) - 1)
+            self._sw = np.sqrt(w[band])
+        return self._sw
+
+    def _weigh(self, a: np.ndarray) -> np.ndarray:
+        sw = self.sw
+        return a if sw is None else a * sw
+
+    def signal(self, sig: Signal) -> np.ndarray:
+        """Return the velocity or acceleration of the smoothed position at the rows."""
+        which = sig.value
+        return self.data.cached(self.key(('signal', which)), lambda: self._weigh(
+            np.concatenate([proc.stencil(proc.smooth_full(mo.position, p.W), p.rows,
+                                         p.kin.dt, which)
+                            for p, mo in zip(self.data.parts, self.motions)])))
+
+    def smooth(self, fn: Any, key: tuple, *, uses_input: bool = False,
+               weigh: bool = True) -> np.ndarray:
+        """Return ``S(fn(part, motion))`` at the rows, cached under ``key``."""
+        def make() -> np.ndarray:
+            out = np.concatenate([proc.smooth_at(fn(p, mo), p.rows, p.W)
+                                  for p, mo in zip(self.data.parts, self.motions)])
+            return self._weigh(out) if weigh else out
+        return self.data.cached(self.key(key + (weigh,), uses_input=uses_input), make)
+
+    def columns(self, cols: Sequence[Column]) -> list[np.ndarray]:
+        """Return terms' columns at the rows: smoothed, stencil-averaged, weighted.
+
+        Columns of one block (``width > 1``, one function giving several columns in one
+        pass) are computed together and each cached under its own key.
+        """
+        out: list[np.ndarray | None] = []
+        todo: dict[int, list[tuple[int, Column]]] = {}
+        for i, col in enumerate(cols):
+            if col.signal is not None:
+                out.append(self.signal(col.signal))
+                continue
+            hit = self.data._cache.get(self.key(col.key, uses_input=col.uses_input))
+            out.append(hit)
+            if hit is None:
+                todo.setdefault(id(col.fn), []).append((i, col))
+        if todo:
+            paths = self.paths()
+            for group in todo.values():
+                col0 = group[0][1]
+                raw = np.concatenate([proc.smooth_at(np.asarray(col0.fn(path), dtype=float),
+                                                     p.rows, p.W)
+                                      for p, path in zip(self.data.parts, paths)])
+                for i, col in group:
+                    a = raw[:, col.index] if raw.ndim == 2 else raw
+                    out[i] = self.data.cached(self.key(col.key, uses_input=col.uses_input),
+                                              lambda a=a, col=col: self._finish(col, a))
+        return out  # type: ignore[return-value]
+
+    def _finish(self, col: Column, a: np.ndarray) -> np.ndarray:
+        if col.frequency:
+            a = a * self.stencil_gain(col.frequency)
+        return self._weigh(np.ascontiguousarray(a))
+
+    def stencil_gain(self, w: float) -> np.ndarray:
+        """Return the stencil's gain on a position-periodic force of frequency ``w``."""
+        def make() -> np.ndarray:
+            vdt = self.gather(lambda p, mo: mo.v * p.kin.dt)
+            return np.ascontiguousarray(proc.stencil_gain(w, vdt)[:, 0])
+        return self.data.cached(('stencil_gain', float(w), self.mkey), make)
+
+    def y(self) -> np.ndarray:
+        """Return the smoothed drive force at the rows (unweighted) with this view's delay."""
+        m = self.data.model
+        k = m.input_gain * m.back_emf + m.damping
+        g = m.input_gain
+        w = self.smooth(lambda p, mo: g * p.kin.input_at(self.tau), ('u',), uses_input=True,
+                        weigh=False)
+        if not k:
+            return w
+        vl = self.data.at(width=self.width, tau=self.tau, model=self.model)\
+            .signal(Signal.VELOCITY)
+        return w - k * vl
+
+    def stuck_force(self) -> np.ndarray:
+        """Return the smoothed drive force of the samples stuck at a turn (unweighted)."""
+        g = self.data.model.input_gain
+        return self.smooth(lambda p, mo: g * mo.shares[2] * p.kin.input_at(self.tau),
+                           ('stuck_u',), uses_input=True, weigh=False)
+
+    def nrmse(self, sse: float) -> float:
+        """Return the force NRMSE of a sum of squared residuals over the rows."""
+        den = self.data.den
+        return math.sqrt(sse / den) if den > 0 else float('inf')
+
+
+__all__ = ['COLUMN_CACHE_BYTES', 'Dataset', 'MIN_DIRECTION_SHARE', 'Motion', 'PathView',
+           'RunPart', 'SpeedWeights', 'View', 'model_signature']

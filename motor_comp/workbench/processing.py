@@ -1,0 +1,257 @@
+"""The one processing of every workbench command: smoothing, derivatives, sample selection.
+
+``compare``, ``diagnose``, ``fit`` and ``monitor_node`` all see a run through this
+module, so the same model and run give the same force NRMSE in every command
+(DESIGN.md §6).  The inverse model ``S·F_in = M·S·ẍ + Σ_k S·F_k`` is formed with one
+zero-phase smoother ``S`` applied alike to the drive force and to every effect's
+pointwise force (so the pass band's shape cancels), and the acceleration is the
+3-point second difference of ``S·x`` (``../shared/IDENTIFICATION.md`` §2).
+
+Why this processing and not the Savitzky–Golay one the first ``compare`` used: on data
+the project did not generate (the independent generator of ``test/workbench``), with
+the *true* model, the force residual it leaves is what the processing itself adds, and
+this one leaves less — measured by ``python bench/processing_choice.py``: MEASURE-ME.
+Three choices make the difference:
+
+* ``S`` is a normalised Blackman window of ``W`` samples (:func:`smoother_length`,
+  twice the derivative window): sidelobes below −58 dB, so the second difference of
+  ``S·x`` stays quiet where a Savitzky–Golay filter leaks;
+* the acceleration is the second difference of ``S·x``: the motion's acceleration
+  averaged with the hat kernel over ``t ± dt`` — for a held command exactly what
+  :meth:`Kinematics.input_at` gives the drive force — so both sides see the same
+  kernel at every frequency; the velocity is the same hat average of ``ẋ``;
+* samples are the sliding ones away from stops (:func:`fit_rows_mask`), every
+  ``W/8``-th (the smoother correlates neighbours anyway), never within a window of a
+  record's ends.
+
+Pointwise laws (the sign of the velocity at a reversal, a Stribeck curve, the GMS
+elements) need the velocity *at* a sample, not averaged over the smoother: they use a
+short Savitzky–Golay derivative (:func:`point_velocity`) and a short smoothing of the
+position (:func:`gms_position`).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from numba import njit
+from scipy.ndimage import correlate1d
+from scipy.signal import savgol_coeffs
+
+from motor_comp.workbench.derivatives import Kinematics
+
+_COEFFS: dict = {}
+
+
+def _coeffs(window: int, polyorder: int, deriv: int = 0) -> np.ndarray:
+    key = (window, polyorder, deriv)
+    c = _COEFFS.get(key)
+    if c is None:
+        c = savgol_coeffs(window, polyorder, deriv=deriv, use='dot')
+        _COEFFS[key] = c
+    return c
+
+
+def kernel(W: int) -> np.ndarray:
+    """Return the smoother ``S``: a normalised Blackman window of ``W`` samples."""
+    key = ('blackman', W)
+    b = _COEFFS.get(key)
+    if b is None:
+        b = np.blackman(W + 2)[1:-1]
+        b = b / b.sum()
+        _COEFFS[key] = b
+    return b
+
+
+def smoother_length(kin: Kinematics, scale: float = 1.0) -> int:
+    """Return the length of ``S`` [samples]: twice the derivative window, times ``scale``."""
+    W = 2 * (kin.window // 2) * 2 + 1
+    if scale != 1.0:
+        W = 2 * max(1, int(round(scale * (W // 2)))) + 1
+    return W
+
+
+def smooth_full(y: np.ndarray, W: int) -> np.ndarray:
+    """Return ``S(y)`` at every sample (mirror padding at the ends)."""
+    return correlate1d(np.asarray(y, dtype=float), kernel(W), mode='mirror', axis=0)
+
+
+def smooth_at(y: np.ndarray, rows: np.ndarray, W: int) -> np.ndarray:
+    """Return ``S(y)`` at ``rows`` only (1-D or 2-D ``y``, time along the first axis).
+
+    The same sums as a full-rate correlation followed by the row selection, at a
+    fraction of the work; the rows are never within a smoother half-width of the ends.
+    """
+    y = np.asarray(y, dtype=float)
+    h = W // 2
+    if len(rows) and (rows[0] < h or rows[-1] + h >= y.shape[0]):
+        raise ValueError('rows within a smoother half-width of the record ends')
+    b = kernel(W)
+    if y.ndim == 1:
+        return _smooth_rows(np.ascontiguousarray(y).reshape(1, -1), rows, b)[:, 0]
+    return _smooth_rows(np.ascontiguousarray(y.T), rows, b)
+
+
+@njit(cache=True, fastmath=True)
+def _smooth_rows(y, rows, b):
+    # hand-written: scipy/numpy filter every sample; the rows are a sparse subset.
+    # Column by column, each a contiguous dot product (y is time-major per column).
+    h = b.shape[0] // 2
+    out = np.empty((rows.shape[0], y.shape[0]))
+    for c in range(y.shape[0]):
+        yc = y[c]
+        for i in range(rows.shape[0]):
+            r0 = rows[i] - h
+            acc = 0.0
+            for j in range(b.shape[0]):
+                acc += b[j] * yc[r0 + j]
+            out[i, c] = acc
+    return out
+
+
+def stencil(xs: np.ndarray, rows: np.ndarray, dt: float, which: str) -> np.ndarray:
+    """Return the velocity or acceleration of the smoothed position ``xs`` at ``rows``.
+
+    The 3-point second difference of a trajectory is its acceleration averaged with the
+    hat kernel over ``t_k ± dt`` — for a zero-order-hold force exactly ``(a_{k−1} +
+    a_k)/2``, the triangle-weighted command :meth:`Kinematics.input_at` gives — so the
+    acceleration and the drive force see the same kernel at every frequency.  The
+    velocity (back-EMF, viscous columns) is the same hat average of ``ẋ``: the step
+    integrals by the 4-point midpoint rule; the central difference alone is a box
+    average, ``dt²/12·v̈`` more than the hat sees, which with a back-EMF damping ``k``
+    reads as a dead time ``k·dt²/(12·M)`` (15 µs on the project's PMLM at 1 kHz).
+    """
+    x, r = xs, rows
+    if which == 'velocity':
+        return ((x[r + 1] - x[r - 1]) / (2 * dt)
+                - (x[r + 2] - 2 * x[r + 1] + 2 * x[r - 1] - x[r - 2]) / (24 * dt))
+    return (x[r + 1] - 2 * x[r] + x[r - 1]) / (dt * dt)
+
+
+def stencil_gain(w: np.ndarray, vdt: np.ndarray) -> np.ndarray:
+    """Return the gain the acceleration stencil applies to ``sin(w·x)``, shape ``(n, len(w))``.
+
+    The second difference of the position averages the acceleration with a triangle of
+    ±1 sample, so a force that varies with position is seen averaged over that
+    triangle too: at a locally constant speed ``v`` a spatial harmonic ``sin(w·x)`` is
+    seen as ``sinc²(w·v·dt/2π)·sin(w·x)`` (a pointwise column left a ripple amplitude
+    0.1–0.7 % short on a 500 Hz sweep).  ``vdt`` is ``v·dt`` at the rows.
+    """
+    w = np.atleast_1d(np.asarray(w, dtype=float))
+    return np.sinc(np.outer(vdt, w) / (2 * math.pi)) ** 2
+
+
+def short_window(kin: Kinematics) -> int:
+    """Return the Savitzky–Golay window of the pointwise laws: a third of the derivative's."""
+    return max(5, (kin.window // 3) | 1)
+
+
+def point_velocity(kin: Kinematics, x: np.ndarray) -> np.ndarray:
+    """Return the pointwise velocity for the nonlinear laws (sign, Stribeck, GMS direction).
+
+    A short Savitzky–Golay derivative (a third of the derivative window, order 2): the
+    sign of the velocity decides the friction direction at every reversal, and a long
+    window moves the sign change — the 21-sample derivative shifted the Coulomb
+    switching enough to bias a dead time by +1.2 ms on the project's closed loop.
+    """
+    return correlate1d(np.asarray(x, dtype=float), _coeffs(short_window(kin), 2, 1),
+                       mode='mirror') / kin.dt
+
+
+def gms_position(kin: Kinematics, x: np.ndarray) -> np.ndarray:
+    """Return the position the GMS elements are driven by: a short Savitzky–Golay smoothing.
+
+    The elements' break-away distances are micrometres; the derivative window's
+    smoothing rounds each reversal over that scale, so a freed shortest element came
+    out stiffer than the truth (+32 % on the project's own 1 kHz run).  The short
+    window keeps the reversal's shape and still averages the encoder noise.
+    """
+    return correlate1d(np.asarray(x, dtype=float), _coeffs(short_window(kin), 2, 0),
+                       mode='mirror')
+
+
+def point_position(kin: Kinematics, x: np.ndarray) -> np.ndarray:
+    """Return the pointwise (derivative-window Savitzky–Golay) position of ``x``."""
+    return correlate1d(np.asarray(x, dtype=float), _coeffs(kin.window, kin.polyorder, 0),
+                       mode='mirror')
+
+
+def sliding_mask(kin: Kinematics) -> np.ndarray:
+    """Select the samples where the axis slides: |ẋ| above 5× its estimation noise.
+
+    The velocity noise of the Savitzky–Golay derivative is estimated from the position
+    noise (or the encoder quantum when the noise is below it) and the filter's own
+    noise gain, so the threshold adapts to the sensor and the sample rate; never
+    below 0.2 % of the peak speed (the sign of a near-stopped axis is arbitrary).
+    """
+    coeff_noise = np.sqrt(np.sum(savgol_coeffs(kin.window, kin.polyorder, deriv=1) ** 2))
+    sigma_x = max(kin.noise_std(), kin.quantum() / np.sqrt(12.0))
+    v_min = 5.0 * sigma_x * coeff_noise / kin.dt
+    v_min = max(v_min, 2e-3 * float(np.max(np.abs(kin.v))))
+    m = np.abs(kin.v) > v_min
+    # the filter's transient at both ends of the record is not trusted
+    m[:kin.window] = False
+    m[-kin.window:] = False
+    return m
+
+
+def fit_rows_mask(kin: Kinematics, *, min_stop: int = 3, half: int | None = None) \
+        -> np.ndarray:
+    """Return the sliding samples whose smoothing window does not reach into a stop.
+
+    A stopped (stuck) axis carries whatever friction balances the drive, so no
+    sliding law explains it (``../shared/IDENTIFICATION.md`` §2); with a smoothing
+    window every sample within half a window of a stop mixes that force in.  Stops
+    are runs of at least ``min_stop`` samples below the sliding threshold; a plain
+    zero crossing of the velocity at a reversal (one or two samples) is kept, since
+    pre-sliding and backlash live there.
+    """
+    m = sliding_mask(kin)
+    still = ~m
+    d = np.diff(np.concatenate([[0], still.astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    half = kin.window // 2 if half is None else int(half)
+    out = m.copy()
+    for a, b in zip(starts, stops):
+        if b - a >= min_stop:
+            out[max(a - half, 0):b + half] = False
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class Processing:
+    """The processing choices of one identification (see the module docstring).
+
+    Parameters
+    ----------
+    smoother_scale : float
+        Length of ``S`` relative to :func:`smoother_length` (the processing term of
+        the standard errors refits with 2).
+    decimate : bool
+        Keep every ``W/8``-th fitted sample (the fits and every reported figure), or
+        every one (the residual figures).
+    """
+
+    smoother_scale: float = 1.0
+    decimate: bool = True
+
+    def step(self, W: int) -> int:
+        """Return the decimation step [samples] for a smoother of ``W`` samples."""
+        return max(1, W // 8) if self.decimate else 1
+
+    def window(self, kin: Kinematics) -> int:
+        """Return the smoother length ``W`` [samples] for ``kin``."""
+        return smoother_length(kin, self.smoother_scale)
+
+    def rows(self, kin: Kinematics, W: int) -> np.ndarray:
+        """Return the fitted samples of ``kin``: sliding, away from stops and ends."""
+        mask = fit_rows_mask(kin, half=W // 2, min_stop=3)
+        mask[:W // 2 + 2] = False
+        mask[len(kin) - W // 2 - 2:] = False
+        return mask
+
+
+__all__ = ['Processing', 'fit_rows_mask', 'gms_position', 'kernel', 'point_position',
+           'point_velocity', 'short_window', 'sliding_mask', 'smooth_at', 'smooth_full',
+           'smoother_length', 'stencil', 'stencil_gain']

@@ -1,0 +1,102 @@
+"""A spec fitted on all rows: the model, its parameters, uncertainties and held-out score.
+
+:func:`estimate` is the one place a design becomes a result: bounded least squares on
+all rows, the held-out score over the validation folds, the jackknife covariance and
+the reported parameters with their standard errors (:mod:`.uncertainty`), the model-file
+form (:func:`.library.encode`), and what the fit says about itself — coefficients that
+ended on a declared bound, and values outside a term's declared domain.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+
+from motor_comp.physics.axis import AxisModel
+from motor_comp.physics.effects import TERMS
+from motor_comp.workbench.dataset import Dataset, SpeedWeights
+from motor_comp.workbench.library import Spec, design, encode, n_params
+from motor_comp.workbench.lsq import solve_gram
+from motor_comp.workbench.uncertainty import block_sandwich, correlations, jacobian, \
+    sandwich, scalars_and_se
+from motor_comp.workbench.varpro import cv_design
+
+
+@dataclasses.dataclass(frozen=True)
+class Estimate:
+    """A spec fitted on all rows, with its held-out score and uncertainties.
+
+    Parameters
+    ----------
+    spec : Spec
+        Effects and nonlinear parameters.
+    model : AxisModel
+        The fitted model (model-file form).
+    values : dict
+        ``{(term, label): value}`` of every coefficient and free nonlinear parameter.
+    scalars : dict[str, dict[str, float]]
+        Reported physical parameters per effect (and ``mass``).
+    se : dict[str, dict[str, float]]
+        Their standard errors (stretch jackknife + delta method).
+    at_bound : dict[str, list[str]]
+        Coefficients the estimator held on a declared bound (``fc ≥ 0`` …).
+    correlations : list of (str, str, float)
+        Strongly correlated parameter pairs ``(group.name, group.name, ρ)``.
+    sse_cv, sse_fit : float
+        Held-out and in-sample sums of squared residuals [N²].
+    n_params : int
+        Fitted parameters (linear and nonlinear).
+    nrmse_cv : float
+        Held-out force NRMSE.
+    inadmissible : dict[str, str]
+        Why a term's fitted values lie outside its declared domain, per term.
+    """
+
+    spec: Spec
+    model: AxisModel
+    values: dict
+    scalars: dict
+    se: dict
+    at_bound: dict
+    correlations: list
+    sse_cv: float
+    sse_fit: float
+    n_params: int
+    nrmse_cv: float
+    inadmissible: dict = dataclasses.field(default_factory=dict)
+
+
+def estimate(data: Dataset, spec: Spec, model: AxisModel, *, cv: bool = True,
+             weights: SpeedWeights | None = None) -> Estimate:
+    """Fit ``spec`` on all rows: θ, covariance, reported parameters, model, score."""
+    jac = jacobian(data, spec, model, weights)
+    cov = sandwich(data, jac.J, jac.e)
+    vals = dict(jac.values)
+    sc, se = scalars_and_se(spec, vals, jac.labels, cov, data)
+    corr = correlations(block_sandwich(data, jac.J, jac.e), jac.labels)
+    d = design(data, spec, model, weights=weights)
+    th, _ = solve_gram(d.gram(), d.bounds)
+    at_bound: dict[str, list[str]] = {}
+    for lab, hit in zip(d.labels, d.bounds.at_bound(th)):
+        if hit:
+            at_bound.setdefault(lab[0], []).append(lab[1])
+    sse_cv = cv_design(data, spec, model, weights)[0] if cv else float('nan')
+    nr = math.sqrt(sse_cv / data.den) if data.den > 0 and np.isfinite(sse_cv) else float('nan')
+    why = {}
+    for n in spec.names:
+        reason = TERMS[n].admissible(vals, spec.of(n), data.summary)
+        if reason:
+            why[n] = reason
+    return Estimate(spec=spec, model=encode(spec, vals, model), values=vals, scalars=sc, se=se,
+                    at_bound=at_bound, correlations=corr, sse_cv=sse_cv, sse_fit=jac.sse,
+                    n_params=n_params(spec), nrmse_cv=nr, inadmissible=why)
+
+
+def replace(est: Estimate, **changes: Any) -> Estimate:
+    """Return ``est`` with some fields changed (a frozen dataclass)."""
+    return dataclasses.replace(est, **changes)
+
+
+__all__ = ['Estimate', 'estimate', 'replace']

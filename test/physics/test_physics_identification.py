@@ -1,0 +1,129 @@
+"""Each effect's identification declarations (its ``TERM``): round trips, columns, needs.
+
+The workbench composes these declarations and never names an effect, so what a term
+declares is the whole of what it means for identification: its encoding must round
+trip through the model file, its block columns must equal one element at a time, and
+its declared needs and domain must say no where the physics does.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from motor_comp.physics.axis import AxisModel
+from motor_comp.physics.effects import TERMS, VOCABULARY, make_effect
+from motor_comp.physics.effects.identification import Context, Summary
+from motor_comp.physics.effects.presliding import gms_trajectory, gms_unit_columns
+
+
+def summary(**kw) -> Summary:
+    base = dict(dt=1e-3, duration=20.0, quantum=1e-6, noise=2e-7, span=(-0.05, 0.05),
+                speeds={1: 1e-4, 10: 1e-3, 50: 0.02, 90: 0.08, 95: 0.1}, accel90=1.0,
+                reversals=20, direction=0, rotary=False)
+    base.update(kw)
+    return Summary(**base)
+
+
+def test_every_effect_of_the_vocabulary_declares_a_term():
+    assert list(TERMS) == [n for n in VOCABULARY if n in TERMS]
+    assert set(TERMS) == set(VOCABULARY)
+    for name, t in TERMS.items():
+        assert t.name == name and t.effect.name == name
+
+
+MODEL = AxisModel(mass=5.0, input_gain=15.0, effects=(
+    make_effect('coulomb', {'fc': 10.0}), make_effect('viscous', {'fv': 20.0}),
+    make_effect('stribeck', {'fs': 14.0, 'vs': 0.01, 'delta': 2.0}),
+    make_effect('ripple', {'period': 0.02, 'harmonics': [[3.0, -1.0], [0.5, 0.2]]}),
+    make_effect('spring', {'k': 300.0, 'x0': 0.01}),
+    make_effect('asymmetry', {'dfc': 1.5, 'dfv': -2.0}),
+    make_effect('delay', {'tau': 1.3e-3}), make_effect('backlash', {'width': 2e-5})))
+
+
+@pytest.mark.parametrize('name', [n for n in MODEL.names])
+def test_encode_inverts_decode(name):
+    t = TERMS[name]
+    ctx = Context(present=frozenset(MODEL.names), eta={}, sticks=False)
+    coef, eta = t.decode(MODEL)
+    values = {(name, k): v for k, v in coef.items()}
+    values[('coulomb', 'fc')] = MODEL.fc
+    (effect,) = [e for e in t.encode(values, eta, ctx) if e.name == name]
+    assert effect == MODEL.get(name)
+
+
+@settings(max_examples=25, deadline=None)
+@given(fc=st.floats(0.5, 50), a=st.lists(st.floats(0.05, 1.0), min_size=1, max_size=4),
+       d0=st.floats(1e-6, 1e-4), c=st.floats(10, 1e5))
+def test_presliding_round_trip(fc, a, d0, c):
+    alpha = tuple(x / sum(a) for x in a)
+    dists = tuple(d0 * 3.0 ** j for j in range(len(a)))
+    gms = make_effect('presliding', {'alpha': alpha, 'k': [al * fc / d for al, d in
+                                                           zip(alpha, dists)], 'C': c * fc})
+    model = AxisModel(mass=1.0, effects=(make_effect('coulomb', {'fc': fc}), gms))
+    t = TERMS['presliding']
+    coef, eta = t.decode(model)
+    ctx = Context(present=frozenset(model.names), eta={'presliding': eta})
+    values = {('presliding', k): v for k, v in coef.items()}
+    out = {e.name: e for e in t.encode(values, eta, ctx)}
+    assert out['coulomb'].fc == pytest.approx(fc, rel=1e-12)
+    assert np.allclose(out['presliding'].k, gms.k, rtol=1e-9)
+    assert np.allclose(out['presliding'].alpha, gms.alpha, rtol=1e-9)
+    assert out['presliding'].C == pytest.approx(gms.C, rel=1e-9)
+
+
+def test_gms_columns_in_one_pass_equal_one_element_at_a_time():
+    rng = np.random.default_rng(3)
+    x = np.cumsum(rng.normal(0, 2e-6, 4000)) + 1e-4 * np.sin(np.linspace(0, 30, 4000))
+    dists = (2e-6, 7e-6, 3e-5)
+    many = gms_unit_columns(x, np.array([1 / d for d in dists]), 800.0, 1.4, 3e-3, 1.3, 1e-3)
+    for j, d in enumerate(dists):
+        one = gms_trajectory(x, np.ones(1), np.array([1.0 / d]), np.zeros(1), 800.0, 1.0,
+                             1.4, 3e-3, 1.3, 1e-3)
+        assert np.max(np.abs(many[:, j] - one)) == 0.0
+
+
+def test_declared_needs_say_no_where_the_physics_does():
+    assert TERMS['gravity'].applicable(summary()) is not None          # linear axis
+    assert TERMS['gravity'].applicable(summary(rotary=True, span=(0, 3))) is None
+    # a spring acts within a revolution
+    assert TERMS['spring'].applicable(summary(rotary=True, span=(0, 50.0))) is not None
+    assert TERMS['spring'].applicable(summary(rotary=True, span=(0, 3.0))) is None
+    # pre-sliding and backlash act at reversals; offset and asymmetry need both ways
+    for name in ('presliding', 'backlash'):
+        assert TERMS[name].applicable(summary(reversals=2)) is not None
+    for name in ('offset', 'asymmetry'):
+        assert TERMS[name].applicable(summary(direction=1)) is not None
+        assert TERMS[name].applicable(summary()) is None
+
+
+def test_declared_domains():
+    s = summary()
+    # a spring whose rest position is far outside the travel is a constant by another name
+    assert TERMS['spring'].admissible({('spring', 'k'): 100.0, ('spring', 'c'): -100.0 * 5.0},
+                                      {}, s) is not None
+    assert TERMS['spring'].admissible({('spring', 'k'): 100.0, ('spring', 'c'): -1.0},
+                                      {}, s) is None
+    # a GMS curve crossed within two samples at the run's acceleration is a stick
+    fast = summary(accel90=100.0)          # 2·a·dt² = 200 µm
+    assert TERMS['presliding'].admissible({}, {'d': (1e-5, 3e-5)}, fast) is not None
+    assert TERMS['presliding'].admissible({}, {'d': (1e-5, 3e-4)}, fast) is None
+
+
+def test_search_spaces_follow_the_sensor_and_the_record():
+    s = summary()
+    ctx = Context(present=frozenset(), eta={})
+    (tau,) = TERMS['delay'].space(s, ctx)
+    assert tau.lo == 0.0 and tau.hi == pytest.approx(0.03)
+    assert TERMS['delay'].space(summary(duration=0.1), ctx)[0].hi == pytest.approx(0.01)
+    d, c = TERMS['presliding'].space(s, ctx)
+    assert d.lo == pytest.approx(3e-6) and d.vector == 4          # three counts
+    (w,) = TERMS['backlash'].space(s, ctx)
+    assert w.lo >= 10 * s.noise and w.hi <= 0.05 * s.travel + 1e-12
+    vs, delta = TERMS['stribeck'].space(s, ctx)
+    assert max(vs.grid) <= 0.1 * s.speeds[95] + 1e-12
+    (period,) = TERMS['ripple'].space(s, ctx)
+    assert period.hi == pytest.approx(s.travel / 3)
+    assert math.isfinite(period.lo) and period.lo > 0

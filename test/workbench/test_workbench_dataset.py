@@ -1,0 +1,136 @@
+"""The dataset's fast paths equal the plain computations they replace, and views are pure.
+
+Smoothing at the rows only, Gram entries cached by column key, the stencil's velocity
+and its gain on a position-periodic force must not change a single estimate: each is
+checked against the direct formula, the Gram cache against ``ZᵀZ`` over random
+sequences of designs — including a backlash gap, whose view changes the motion under
+cached columns — and a view never changes what another view returns.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+from scipy.ndimage import correlate1d
+
+from motor_comp.physics.effects.identification import Signal
+from motor_comp.workbench import kinematics
+from motor_comp.workbench import processing as proc
+from motor_comp.workbench.dataset import Dataset
+from motor_comp.workbench.library import Spec, design
+from motor_comp.workbench.synthetic import scenario
+
+
+@pytest.fixture(scope='module')
+def data():
+    sc = scenario(('ripple',), seed=4)
+    kin = kinematics(sc.run(duration=6.0, seed=4))
+    return Dataset([kin], sc.plant), sc.plant
+
+
+@settings(max_examples=30, deadline=None)
+@given(W=st.sampled_from([7, 21, 41, 81]), step=st.integers(1, 9),
+       cols=st.integers(1, 4), seed=st.integers(0, 2**31 - 1))
+def test_smoothing_at_the_rows_equals_full_rate_filtering(W, step, cols, seed):
+    rng = np.random.default_rng(seed)
+    n = 3000
+    y = rng.normal(size=(n, cols)) * rng.uniform(0.1, 100.0)
+    rows = np.arange(W // 2 + 2, n - W // 2 - 2, step)
+    ref = correlate1d(y, proc.kernel(W), axis=0, mode='mirror')[rows]
+    scale = np.max(np.abs(y))
+    assert np.max(np.abs(proc.smooth_at(y, rows, W) - ref)) < 1e-13 * scale
+    assert np.max(np.abs(proc.smooth_at(y[:, 0], rows, W) - ref[:, 0])) < 1e-13 * scale
+
+
+def test_smoothing_refuses_rows_at_the_record_ends():
+    with pytest.raises(ValueError, match='record ends'):
+        proc.smooth_at(np.zeros(200), np.array([5, 100]), 21)
+
+
+def test_stencil_gain_is_the_triangle_average_the_second_difference_sees(data):
+    """At a constant speed, the 3-point second difference sees ``sin(w·x)`` averaged
+    with a ±1-sample triangle: ``∫ tri(s)·sin(w·(x + v·s)) ds = g·sin(w·x)``."""
+    D, _ = data
+    view = D.at()
+    dt = D.kins[0].dt
+    v = view.gather(lambda p, mo: mo.v)
+    w = 2 * np.pi / 0.004           # a 4 mm ripple: up to ~1 rad per sample here
+    s = np.linspace(-dt, dt, 4001)
+    tri = (1 - np.abs(s) / dt) / dt
+    # the sine's phase drops out: the triangle is even, so only cos(w·v·s) survives
+    avg = np.trapezoid(tri * np.cos(w * np.outer(v, s)), s, axis=1)
+    g = view.stencil_gain(w)
+    assert np.max(np.abs(w * v * dt)) > 0.5            # the test has teeth
+    assert np.max(np.abs(g - avg)) < 1e-6
+    assert np.min(g) < 0.99
+
+
+SPECS = [
+    Spec(('coulomb', 'viscous'), {}),
+    Spec(('coulomb', 'viscous', 'ripple'), {'ripple': {'period': 0.0137, 'harmonics': 2}}),
+    Spec(('coulomb', 'viscous', 'stribeck'), {'stribeck': {'vs': 4e-3, 'delta': 1.0}}),
+    Spec(('coulomb', 'viscous', 'offset', 'spring'), {}),
+    Spec(('coulomb', 'viscous', 'delay'), {'delay': {'tau': 1.3e-3}}),
+    Spec(('coulomb', 'viscous', 'presliding'),
+         {'presliding': {'d': (1.2e-6, 4e-6, 1.2e-5), 'c': 900.0, 'ratio': 0.0}}),
+    Spec(('coulomb', 'asymmetry', 'backlash'), {'backlash': {'width': 3e-5}}),
+    Spec(('coulomb', 'viscous'), {}, mass_free=False, mass=5.0),
+]
+
+
+@settings(max_examples=25, deadline=None)
+@given(order=st.lists(st.integers(0, len(SPECS) - 1), min_size=2, max_size=8),
+       fold=st.integers(-1, 4))
+def test_cached_gram_equals_the_direct_product(data, order, fold):
+    D, model = data
+    rows = None if fold < 0 else D.train_rows(fold)
+    for i in order:
+        d = design(D, SPECS[i], model)
+        Z = np.column_stack(d.cols + [d.y])
+        if rows is not None:
+            Z = Z[rows]
+        ref = Z.T @ Z
+        assert np.allclose(d.gram(rows), ref, rtol=1e-12, atol=1e-12 * np.max(np.abs(ref)))
+
+
+def test_views_do_not_change_each_other(data):
+    """A view with a gap and a delay leaves the measured view's arrays as they were."""
+    D, model = data
+    before = D.at().signal(Signal.ACCELERATION).copy()
+    y0 = D.at().y().copy()
+    gap = D.at(width=3e-5, tau=1e-3, model=model)
+    assert not np.allclose(gap.signal(Signal.ACCELERATION), before)
+    assert not np.allclose(gap.y(), y0)
+    np.testing.assert_array_equal(D.at().signal(Signal.ACCELERATION), before)
+    np.testing.assert_array_equal(D.at().y(), y0)
+    assert D.at() is D.at()
+
+
+class _Kin:
+    def __init__(self, dt: float) -> None:
+        self.dt = dt
+
+
+@pytest.mark.parametrize('w_dt', [0.05, 0.3, 0.8])
+def test_stencil_velocity_is_the_hat_average_the_second_difference_sees(w_dt):
+    """The velocity column is ``ẋ`` under the hat kernel of the acceleration stencil.
+
+    For ``x = sin(w·t)``: ``∫ hat(s)·ẋ(t + s) ds = w·cos(w·t)·sinc²(w·dt/2π)`` (the
+    3-point second difference sees ``a`` with the same gain).  The central difference
+    is a box over ±dt (gain ``sinc(w·dt/π)``): with a back-EMF damping k it left a
+    dead time of k·dt²/(12·M) in the fits.
+    """
+    dt = 1e-3
+    w = w_dt / dt
+    t = np.arange(2000) * dt
+    x = np.sin(w * t)
+    rows = np.arange(5, 1995)
+    hat = w * np.cos(w * t[rows]) * np.sinc(w * dt / (2 * np.pi)) ** 2
+    acc = -w * w * np.sin(w * t[rows]) * np.sinc(w * dt / (2 * np.pi)) ** 2
+    assert np.allclose(proc.stencil(x, rows, dt, 'acceleration'), acc, rtol=0,
+                       atol=1e-9 * w * w)
+    err = np.max(np.abs(proc.stencil(x, rows, dt, 'velocity') - hat)) / w
+    central = np.max(np.abs((x[rows + 1] - x[rows - 1]) / (2 * dt) - hat)) / w
+    # 4-point midpoint rule: error O((w·dt)⁴) against the central difference's O((w·dt)²)
+    assert err < 0.02 * (w_dt ** 4) + 1e-12
+    assert central > 0.05 * w_dt ** 2
