@@ -17,9 +17,15 @@ diagnostic aggregator, Foxglove) with one ``DiagnosticStatus``:
   explain the residual (``changed`` or ``missing``), the share it ``explains`` and its
   fitted ``change``.
 
-Every parameter is live: a new ``model`` is loaded and validated (a bad file is
-rejected with the reason and the old model stays); thresholds must keep
-``0 < warn_nrmse < error_nrmse``.  Level changes are logged.
+The array's header is stamped with ``window_end_s`` (the newest measurement's stamp:
+sim time in lockstep), so a recording logs each verdict beside the samples it judged.
+
+Every parameter but ``timing`` and ``model_dir`` is live: a new ``model`` is loaded and
+validated (a bad file is rejected with the reason and the old model stays); thresholds
+must keep ``0 < warn_nrmse < error_nrmse``.  Level changes are logged.  The model file
+is read under :mod:`motor_comp.param_files`: only inside ``model_dir``, only a regular
+file under a size bound, and a rejection reason (returned to the caller and logged, so
+on ``/rosout``) never quotes the file.
 """
 from __future__ import annotations
 
@@ -33,9 +39,10 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
+from motor_comp import param_files
 from motor_comp.errors import ParameterError
-from motor_comp.nodes.common import DEFAULT_NAMESPACE, RECORD_QOS, TOPIC_JOINT_STATES, \
-    TOPIC_VOLTAGE, Param, ParamNode, run_node, stamp_to_ns
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, MODEL_DIR, RECORD_QOS, \
+    TOPIC_JOINT_STATES, TOPIC_VOLTAGE, Param, ParamNode, run_node, set_stamp, stamp_to_ns
 from motor_comp.physics.axis import AxisModel
 from motor_comp.workbench.monitor import Health, Level, check_thresholds, window_health
 
@@ -48,6 +55,7 @@ PARAMS = (
     Param('timing', 'lockstep', 'How commands pair with measurements: lockstep (the k-th '
           'command answers the k-th measurement) or realtime (the newest one)',
           choices=('lockstep', 'realtime'), read_only=True),
+    MODEL_DIR,
 )
 
 #: /diagnostics: the ROS convention (reliable, volatile, shallow)
@@ -57,11 +65,11 @@ _LEVEL_BYTES = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN
                 Level.ERROR: DiagnosticStatus.ERROR, Level.STALE: DiagnosticStatus.STALE}
 
 
-def load_model(path: str) -> AxisModel:
-    """Load the watched model; an empty path is an error naming the parameter."""
+def load_model(path: str, dirs: Any) -> AxisModel:
+    """Load the watched model from inside ``dirs``; an empty path names the parameter."""
     if not path.strip():
         raise ParameterError('model: a model file (YAML) is required')
-    return AxisModel.load(path)
+    return param_files.load_model('model', path, dirs)[1]
 
 
 def diagnostic_status(health: Health, *, name: str, hardware_id: str, window: float,
@@ -92,7 +100,7 @@ class MonitorNode(ParamNode):
         super().__init__('monitor_node', namespace=DEFAULT_NAMESPACE)
         self.declare_params(PARAMS)
         check_thresholds(self.p['warn_nrmse'], self.p['error_nrmse'])
-        self.model = load_model(self.p['model'])
+        self.model = load_model(self.p['model'], self.file_dirs)
         self._samples: collections.deque = collections.deque()
         # lockstep: measurements waiting for their command and commands that overtook
         # their measurement (two writers: arrival order across topics is not defined)
@@ -192,7 +200,7 @@ class MonitorNode(ParamNode):
         health = window_health(data[:, 0], data[:, 1], data[:, 2], self.model,
                                warn=self.p['warn_nrmse'], error=self.p['error_nrmse'])
         arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
+        set_stamp(arr.header.stamp, int(round(data[-1, 0] * 1e9)))   # the window's end
         arr.status = [diagnostic_status(health, name=self.status_name,
                                         hardware_id=self.hardware_id,
                                         window=self.p['window'], window_end=data[-1, 0],
@@ -210,7 +218,7 @@ class MonitorNode(ParamNode):
         """Validate thresholds and a new model file before anything changes."""
         check_thresholds(new['warn_nrmse'], new['error_nrmse'])
         if 'model' in changed:
-            model = load_model(new['model'])   # a bad file raises: the old model stays
+            model = load_model(new['model'], self.file_dirs)   # bad: the old one stays
             self.model = model
             self.get_logger().info(f'now watching {new["model"]}')
 
