@@ -185,17 +185,20 @@ PROBLEMS = ('unknown field', 'unknown effect', 'unknown parameter', 'missing fie
 _QUOTED = re.compile(r"'[^'\n]*'|\"[^\"\n]*\"")
 _NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*')
 _ROW = re.compile(r'\brow (\d+)\b')
+_PAREN = re.compile(r'\([^()]*\)')
 
 
 def _detail(message: str, real: Path, vocabulary: Collection[str]) -> list[str]:
     """Keep of a parser's message what may be shown: schema names, a phrase, a row.
 
-    Quoted text (a parser quotes what it found: an unknown key, a bad value) and the
-    path are dropped first; of the rest only a dotted name whose every part is in
+    Quoted text (a parser quotes what it found: an unknown key, a bad value), the path
+    and parenthesised lists of the valid names are dropped first; of the rest only a dotted name whose every part is in
     ``vocabulary`` (the schema's field names), the first phrase of :data:`PROBLEMS`
     and a row number survive.
     """
     text = _QUOTED.sub(' ', message.replace(str(real), ' '))
+    # a parenthesis lists the valid names ("known: …", "expected […]"), not the culprit
+    text = _PAREN.sub(' ', text)
     out = []
     for m in _NAME.finditer(text):
         if all(part in vocabulary for part in m.group().split('.')):
