@@ -357,11 +357,13 @@ class RunSpec:
             motion = {'travel': [float(v) for v in lim.travel], 'vmax': lim.vmax,
                       'amax': lim.amax}
             params['trajectory_node'].update(motion)
+            # its limits status (armed, a trip) reaches the recorder from the start on
             params['controller_node'].update(motion, umax=lim.umax,
-                                             max_error=lim.max_error, exit_on_trip=True)
+                                             max_error=lim.max_error, exit_on_trip=True,
+                                             diagnostics_readers=1)
         if self.monitor:
             params['monitor_node'] = {**files, 'model': str(Path(self.monitor).resolve()),
-                                      'timing': self.timing}
+                                      'timing': self.timing, 'diagnostics_readers': 1}
             # voltage readers: plant, recorder, monitor
             params['controller_node']['expected_subscribers'] = 3
             params['recorder_node']['nodes'] = ('plant_node,trajectory_node,'

@@ -91,7 +91,9 @@ def _read(fh: BinaryIO, topic: str, out: list[DiagnosticRecord], *, seeking: boo
 
     cls = SeekingReader if seeking else NonSeekingReader
     reader = cls(fh, decoder_factories=[DecoderFactory()])
-    for schema, _, _, msg in reader.iter_decoded_messages(topics=[topic]):
+    # in file order: sorting by log time would first read the whole (damaged) file
+    for schema, _, _, msg in reader.iter_decoded_messages(topics=[topic],
+                                                          log_time_order=seeking):
         if schema is None or schemas.normalise_type(schema.name) != schemas.DIAGNOSTIC_ARRAY:
             continue
         t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9

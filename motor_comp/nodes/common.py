@@ -343,6 +343,14 @@ MOTION_LIMITS = (
 )
 
 
+#: nodes that publish on /diagnostics (monitor, controller with limits): who must hear
+#: them before the loop starts (the recorder), as the loop's own writers wait for theirs
+DIAGNOSTICS_READERS = Param(
+    'diagnostics_readers', 0, 'Readers of /diagnostics (e.g. the recorder) that must have '
+    'matched this node\'s status writer before it joins the loop, so none misses a status '
+    '(after 10 s it goes on with a warning)', '', 0, 100, read_only=True)
+
+
 def limits_from(p: Mapping[str, Any]) -> Any:
     """Return the :class:`~motor_comp.control.limits.Limits` of a node's parameters.
 

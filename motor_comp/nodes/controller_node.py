@@ -100,10 +100,10 @@ from motor_comp.control.controller import ControlMode, Feedforward, default_para
     make_controller
 from motor_comp.control.limits import Guard, Trip
 from motor_comp.errors import ParameterError
-from motor_comp.nodes.common import DEFAULT_NAMESPACE, DELAY_BIN_NS, DELAY_BINS, LOOP_QOS, \
-    MODEL_DIR, MOTION_LIMITS, REALTIME_PRIORITY, SUB_QOS, TOPIC_JOINT_STATES, \
-    TOPIC_REFERENCE, TOPIC_VOLTAGE, ManagedNode, Pacer, Param, Timing, format_delays, \
-    limits_from, read_joint_state, run_node, set_realtime_priority, set_stamp
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, DELAY_BIN_NS, DELAY_BINS, \
+    DIAGNOSTICS_READERS, LOOP_QOS, MODEL_DIR, MOTION_LIMITS, REALTIME_PRIORITY, SUB_QOS, \
+    TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, ManagedNode, Pacer, Param, Timing, \
+    format_delays, limits_from, read_joint_state, run_node, set_realtime_priority, set_stamp
 from motor_comp.control.nominal import derive_nominal
 from motor_comp.physics.config import PlantConfig
 
@@ -152,6 +152,7 @@ BASE_PARAMS = (
     Param('trip_hold', 0.05, 'With exit_on_trip: stamp time of 0 V commands after the trip '
           'before the node exits (the recording shows the stop)', 's', 0.0, 60.0,
           read_only=True),
+    DIAGNOSTICS_READERS,
 )
 
 #: how long a node waits for its expected peers before it goes on with a warning [s]
@@ -318,6 +319,9 @@ class ControllerNode(ManagedNode):
         if readers < self.p['expected_subscribers']:
             missing.append(f'{self.p["expected_subscribers"]} voltage readers (have '
                            f'{readers})')
+        if self.pub_diag is not None and \
+                self.pub_diag.get_subscription_count() < self.p['diagnostics_readers']:
+            missing.append(f'{self.p["diagnostics_readers"]} /diagnostics readers')
         if missing:
             if time.monotonic() - self._since < MATCH_TIMEOUT:
                 return

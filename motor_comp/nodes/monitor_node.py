@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import collections
 import json
+import time
 from typing import Any, Mapping
 
 import numpy as np
@@ -41,7 +42,8 @@ from std_msgs.msg import Float64
 
 from motor_comp import param_files
 from motor_comp.errors import ParameterError
-from motor_comp.nodes.common import DEFAULT_NAMESPACE, MODEL_DIR, RECORD_QOS, \
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, DIAGNOSTICS_READERS, MODEL_DIR, \
+    RECORD_QOS, \
     TOPIC_JOINT_STATES, TOPIC_VOLTAGE, Param, ParamNode, run_node, set_stamp, stamp_to_ns
 from motor_comp.physics.axis import AxisModel
 from motor_comp.workbench.monitor import Health, Level, check_thresholds, window_health
@@ -56,7 +58,11 @@ PARAMS = (
           'command answers the k-th measurement) or realtime (the newest one)',
           choices=('lockstep', 'realtime'), read_only=True),
     MODEL_DIR,
+    DIAGNOSTICS_READERS,
 )
+
+#: how long the monitor waits for its /diagnostics readers before joining anyway [s]
+MATCH_TIMEOUT = 10.0
 
 #: /diagnostics: the ROS convention (reliable, volatile, shallow)
 DIAG_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -129,6 +135,7 @@ class MonitorNode(ParamNode):
         self._volt_sub = self.mark_hot(self.create_subscription(
             Float64, TOPIC_VOLTAGE, self._on_command, RECORD_QOS))
         self._js_sub = None
+        self._since = time.monotonic()
         self._match_timer = self.create_timer(0.05, self._subscribe_joint_states)
         self.get_logger().info(f'watching {self.p["model"]} over {self.p["window"]:g} s '
                                f'(WARN from NRMSE {self.p["warn_nrmse"]:g}, ERROR from '
@@ -137,6 +144,15 @@ class MonitorNode(ParamNode):
     def _subscribe_joint_states(self) -> None:
         if self._volt_sub.get_publisher_count() < 1:
             return
+        # our verdicts' readers (the recorder) too: the plant starts when it sees our
+        # joint_states reader, and a volatile reader misses what came before its match
+        need = self.p['diagnostics_readers']
+        if self.pub.get_subscription_count() < need:
+            if time.monotonic() - self._since < MATCH_TIMEOUT:
+                return
+            self.get_logger().warning(f'{self.pub.get_subscription_count()} of {need} '
+                                      f'/diagnostics readers after {MATCH_TIMEOUT:g} s: '
+                                      'joining the loop anyway')
         self.destroy_timer(self._match_timer)
         self._match_timer = None
         self._js_sub = self.mark_hot(self.create_subscription(
