@@ -192,9 +192,9 @@ def _detail(message: str, real: Path, vocabulary: Collection[str]) -> list[str]:
     """Keep of a parser's message what may be shown: schema names, a phrase, a row.
 
     Quoted text (a parser quotes what it found: an unknown key, a bad value), the path
-    and parenthesised lists of the valid names are dropped first; of the rest only a dotted name whose every part is in
-    ``vocabulary`` (the schema's field names), the first phrase of :data:`PROBLEMS`
-    and a row number survive.
+    and parenthesised lists of the valid names are dropped first; of the rest only a
+    dotted name whose every part is in ``vocabulary`` (the schema's field names), the
+    first phrase of :data:`PROBLEMS` and a row number survive.
     """
     text = _QUOTED.sub(' ', message.replace(str(real), ' '))
     # a parenthesis lists the valid names ("known: …", "expected […]"), not the culprit

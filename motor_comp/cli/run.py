@@ -374,7 +374,7 @@ class RunSpec:
 
 
 def _partial_path(out: Path) -> Path:
-    """A new file next to ``out`` for the recorder (it never overwrites a file)."""
+    """Return a new file next to ``out`` for the recorder (it never overwrites a file)."""
     for i in itertools.count():
         tag = f'{os.getpid()}' + (f'-{i}' if i else '')
         tmp = out.with_name(f'{out.stem}.partial-{tag}{out.suffix or ".mcap"}')
@@ -384,7 +384,7 @@ def _partial_path(out: Path) -> Path:
 
 
 def _trip_reason(proc: NodeProcess) -> str:
-    """The controller's one-line trip reason (its ``<node>: error: …`` line)."""
+    """Return the controller's one-line trip reason (its ``<node>: error: …`` line)."""
     try:
         lines = proc.log.read_text(errors='replace').splitlines()
     except OSError:

@@ -486,7 +486,7 @@ class ControllerNode(ManagedNode):
 
     # -- limits ----------------------------------------------------------------------
     def _on_trip(self, trip: Trip, t_ns: int) -> float:
-        """A limit broke: latch the trip, say so (log, /diagnostics); the command: 0 V."""
+        """Latch a trip, say so (log, /diagnostics); return the command to send: 0 V."""
         self.trip = trip
         self._trip_t = t_ns * 1e-9
         self.exit_status, self.exit_reason = TRIP_EXIT_STATUS, trip.message
