@@ -582,6 +582,8 @@ def run(args: argparse.Namespace) -> int:
     if args.monitor:
         AxisModel.load(args.monitor)   # and a bad monitor model
     travel = tuple(args.travel) if args.travel else (-math.inf, math.inf)
+    if not travel[0] < travel[1]:
+        raise ParameterError(f'--travel: expected MIN < MAX, got {travel[0]:g} {travel[1]:g}')
     limits = Limits(travel=travel, vmax=args.vmax or math.inf, amax=args.amax or math.inf,
                     umax=args.umax or math.inf, max_error=args.max_error or math.inf)
     spec = RunSpec(output=args.output, plant=args.plant, controller=args.controller,

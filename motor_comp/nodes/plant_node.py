@@ -32,6 +32,9 @@ command, exactly as a drive does.
 
 A non-finite command never reaches the physics: it is refused with a warning and the
 step is taken at 0 V, so the loop goes on.
+
+A ``plant`` YAML file is read under :mod:`motor_comp.param_files` (inside the read-only
+``model_dir``, a regular file under a size bound, reasons that never quote it).
 """
 from __future__ import annotations
 

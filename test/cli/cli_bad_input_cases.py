@@ -401,7 +401,7 @@ CASES: list[Case] = _run_file_cases() + [
        ['--domain-id']),
     _c('run-no-output', 'run', 'required -o missing', 'run', ['-o']),
     _c('run-travel-order', 'run', '--travel MIN MAX with MIN > MAX',
-       'run --travel 0.05 -0.05 -o {d}/r.mcap', ['travel', 'min < max']),
+       'run --travel 0.05 -0.05 -o {d}/r.mcap', ['--travel', 'MIN < MAX', '0.05 -0.05']),
     _c('run-travel-nan', 'run', '--travel nan 1', 'run --travel nan 1 -o {d}/r.mcap',
        ['--travel', 'nan']),
     _c('run-vmax-zero', 'run', '--vmax 0', 'run --vmax 0 -o {d}/r.mcap', ['--vmax']),
