@@ -16,9 +16,10 @@ controller's one-line reason (exit status 3).
 
 Files: the nodes may read files only inside their ``model_dir``; the run sets it to the
 working directory, the package ``config/`` and the directories of the files named on
-its command line (``--plant FILE``, ``--monitor MODEL``).  The recorder creates a new
-file (``<stem>.partial-<pid>.mcap`` next to ``-o``) that is moved to ``-o`` when the run
-ends or trips (a failed run keeps it under its own name and says so).
+its command line (``--plant FILE``, ``--monitor MODEL``).  The recorder only creates new
+files: when ``-o`` exists it writes ``<stem>.partial-<pid>.mcap`` next to it, moved onto
+``-o`` when the run ends or trips (a run that fails otherwise leaves the old ``-o`` as
+it was and names the partial file in its error).
 
 :class:`NodeGroup` (process start, wait, clean stop — also on errors) is shared with
 ``motor-comp demo`` and the node tests.
@@ -414,7 +415,8 @@ def run_nodes(spec: RunSpec, *, workdir: Path | None = None, timeout: float | No
                     duration=spec.duration, rate=spec.control_rate)
     if timeout is None:
         timeout = 60.0 + 20.0 * spec.duration
-    partial = _partial_path(out)
+    # the recorder only creates new files: an existing -o is replaced at the end
+    partial = _partial_path(out) if os.path.lexists(out) else out
     spec = dataclasses.replace(spec, output=partial)
     with tempfile.TemporaryDirectory(prefix='motor_comp_run_') as tmp:
         work = Path(workdir or tmp)
@@ -449,10 +451,11 @@ def run_nodes(spec: RunSpec, *, workdir: Path | None = None, timeout: float | No
                                            f'{statuses["recorder_node"]}: '
                                            f'{group.procs["recorder_node"].tail()}')
         except MotorCompError as exc:
-            if os.path.exists(partial):   # keep what was recorded, under its own name
+            if partial != out and os.path.exists(partial):   # the old -o stays as it was
                 raise type(exc)(f'{exc} (what was recorded is in {partial})') from None
             raise
-        os.replace(partial, out)   # the run ended or tripped: its recording is -o
+        if partial != out:
+            os.replace(partial, out)   # the run ended or tripped: its recording is -o
         if progress:
             print(f'motor-comp run: done in {time.monotonic() - t0:.1f} s wall → {out}',
                   file=sys.stderr)

@@ -114,3 +114,38 @@ def test_tracking_error_trip_on_a_worn_axis(tmp_path: Path, ros_env) -> None:
                '--duration', str(DURATION), '--max-error', str(bound), '-o', str(out),
                '--json', '--domain-id', ros_env['ROS_DOMAIN_ID'], env=ros_env)
     _check_trip(tmp_path, out, cli, sim, k, expected)
+
+
+def test_limit_parameters_at_start_and_at_run_time(tmp_path: Path, nodes, probe) -> None:
+    """Bad limits or a trajectory beyond them: one line, exit 2; live: rejected, kept."""
+    def start(name: str, node: str, params: dict) -> None:
+        f = tmp_path / f'{name}.yaml'
+        f.write_text(yaml.safe_dump({f'/axis/{node}': {'ros__parameters': params}}))
+        nodes.start_as(name, node, f)
+
+    start('bad_travel', 'controller_node', {'travel': [0.05, -0.05]})
+    start('beyond', 'trajectory_node', {'trajectory': 'p2p', 'duration': 2.0,
+                                        'travel': [-0.01, 0.03]})
+    for name, needle in (('bad_travel', 'travel: expected min < max, got [0.05, -0.05]'),
+                         ('beyond', 'trajectory refused: travel limit: reference position')):
+        assert nodes.wait(name, 60, watch=False) == 2
+        log = nodes.procs[name].log.read_text()
+        errors = [ln for ln in log.splitlines() if ': error: ' in ln]
+        assert len(errors) == 1 and needle in errors[0], log
+        assert 'Traceback' not in log
+
+    # a running trajectory node: a change beyond the limits is rejected, the old stays
+    start('trajectory_node', 'trajectory_node', {'trajectory': 'p2p', 'duration': 2.0,
+                                                 'travel': [-0.01, 0.06], 'vmax': 0.2})
+    res = probe.set_parameters('trajectory_node', p2p__distance=0.08)[0]
+    assert not res.successful
+    assert res.reason.startswith('trajectory refused: travel limit: reference position '), \
+        res.reason
+    assert probe.get_parameter('trajectory_node', 'p2p.distance') == 0.05
+    res = probe.set_parameters('trajectory_node', p2p__move_time=0.2)[0]   # 0.47 m/s
+    assert not res.successful and 'speed limit: reference velocity' in res.reason
+    assert probe.set_parameters('trajectory_node', p2p__distance=0.052)[0].successful
+    # limits are read-only: not loosened from the graph
+    res = probe.set_parameters('trajectory_node', travel=[-1.0, 1.0])[0]
+    assert not res.successful and 'read-only' in res.reason
+    nodes.check_alive(except_=('bad_travel', 'beyond'))
