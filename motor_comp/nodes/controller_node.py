@@ -85,14 +85,14 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from typing import Any, Mapping
+from pathlib import Path
+from typing import Any, Mapping, Sequence
 
 import numpy as np
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
-
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
 
 from motor_comp import param_files
 from motor_comp.control import compensation
@@ -618,7 +618,7 @@ class ControllerNode(ManagedNode):
                                    f'feedforward from command {self.steps}')
 
 
-def load_compensation(new: Mapping[str, Any], dirs: Any) -> Any:
+def load_compensation(new: Mapping[str, Any], dirs: Sequence[Path]) -> Any:
     """Load the compensation the parameters name (None if both are empty); one-line errors.
 
     ``compensation_model`` and ``compensation_table`` are exclusive; setting one while

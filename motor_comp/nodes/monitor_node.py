@@ -32,7 +32,8 @@ from __future__ import annotations
 import collections
 import json
 import time
-from typing import Any, Mapping
+from pathlib import Path
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -43,8 +44,8 @@ from std_msgs.msg import Float64
 from motor_comp import param_files
 from motor_comp.errors import ParameterError
 from motor_comp.nodes.common import DEFAULT_NAMESPACE, DIAGNOSTICS_READERS, MODEL_DIR, \
-    RECORD_QOS, \
-    TOPIC_JOINT_STATES, TOPIC_VOLTAGE, Param, ParamNode, run_node, set_stamp, stamp_to_ns
+    RECORD_QOS, TOPIC_JOINT_STATES, TOPIC_VOLTAGE, Param, ParamNode, run_node, set_stamp, \
+    stamp_to_ns
 from motor_comp.physics.axis import AxisModel
 from motor_comp.workbench.monitor import Health, Level, check_thresholds, window_health
 
@@ -71,7 +72,7 @@ _LEVEL_BYTES = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN
                 Level.ERROR: DiagnosticStatus.ERROR, Level.STALE: DiagnosticStatus.STALE}
 
 
-def load_model(path: str, dirs: Any) -> AxisModel:
+def load_model(path: str, dirs: Sequence[Path]) -> AxisModel:
     """Load the watched model from inside ``dirs``; an empty path names the parameter."""
     if not path.strip():
         raise ParameterError('model: a model file (YAML) is required')
