@@ -76,9 +76,10 @@ that command on the node commands 0 V (latched until it is configured again — 
 cleanup + configure — or restarted), logs one error line with the cause and the values,
 publishes an ERROR ``DiagnosticStatus`` (``motor_comp/<ns>: limits``, stamped with the
 measurement that broke the limit; an OK one with the limits at the first command) on
-``/diagnostics``, and exits with status 3 and the cause as its last line — after
-``trip_hold`` more seconds of 0 V with ``exit_on_trip`` (as ``motor-comp run`` starts
-it), else when it is stopped.
+``/diagnostics`` (the reason's time ``t`` is sim time in lockstep, the time since the
+first sample answered in realtime, whose stamps are wall-clock based), and exits with
+status 3 and the cause as its last line — after ``trip_hold`` more seconds of 0 V with
+``exit_on_trip`` (as ``motor-comp run`` starts it), else when it is stopped.
 """
 from __future__ import annotations
 
@@ -257,6 +258,7 @@ class ControllerNode(ManagedNode):
         self.trip = None
         self.exit_status, self.exit_reason = 0, ''
         self._armed_sent = False
+        self._t0_ns: int | None = None
         if self.guard is not None and self.pub_diag is None:
             self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics',
                                                   LIMITS_QOS)
@@ -476,7 +478,12 @@ class ControllerNode(ManagedNode):
             if not self._armed_sent:
                 self._armed_sent = True
                 self._publish_status(t_ns, None)
-            if guard.check(t_ns * 1e-9, ref[0], ref[1], ref[2], y, vy, u) is not None:
+            if self._t0_ns is None:
+                # lockstep stamps are sim time (from 0); realtime ones are wall-clock
+                # based: a trip's time is then counted from the first sample answered
+                self._t0_ns = 0 if self.timing is Timing.LOCKSTEP else t_ns
+            if guard.check((t_ns - self._t0_ns) * 1e-9, ref[0], ref[1], ref[2], y, vy,
+                           u) is not None:
                 u = self._on_trip(guard.trip, t_ns)
         self._out.data = u
         self._pub_out.publish(self._out)
@@ -488,7 +495,7 @@ class ControllerNode(ManagedNode):
     def _on_trip(self, trip: Trip, t_ns: int) -> float:
         """Latch a trip, say so (log, /diagnostics); return the command to send: 0 V."""
         self.trip = trip
-        self._trip_t = t_ns * 1e-9
+        self._trip_t = t_ns * 1e-9   # stamp time: trip_hold counts on the samples' clock
         self.exit_status, self.exit_reason = TRIP_EXIT_STATUS, trip.message
         self.get_logger().error(f'TRIP {trip.message}: commanding 0 V from command '
                                 f'{self.steps} on (latched until configured again)')
