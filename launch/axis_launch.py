@@ -31,7 +31,10 @@ ARGS = {
     'timing': ('lockstep', 'lockstep | realtime'),
     'control_rate': ('1000.0', 'control rate [Hz]'),
     'duration': ('0.0', 'sim time [s] before the plant exits; 0 = until Ctrl-C'),
-    'output': ('run.mcap', 'MCAP file written by the recorder'),
+    'output': ('run.mcap', 'new MCAP file written by the recorder (an existing file is '
+               'refused, never overwritten)'),
+    'model_dir': ('', 'directories the nodes may read files from, ":"-separated (a plant '
+                  'file must be inside); empty = the working directory and config/'),
     'autostart': ('true', 'plant, controller, recorder configure and activate themselves; '
                   'false = they wait unconfigured for a lifecycle manager '
                   '(ros2 lifecycle set /axis/<node> configure|activate …)'),
@@ -51,13 +54,13 @@ def generate_launch_description() -> LaunchDescription:
     timing = {'timing': _arg('timing'), 'control_rate': _arg('control_rate', float)}
     overrides = {
         'plant_node': {**timing, 'plant': _arg('plant'), 'duration': _arg('duration', float),
-                       'autostart': _arg('autostart', bool)},
+                       'autostart': _arg('autostart', bool), 'model_dir': _arg('model_dir')},
         'trajectory_node': {**timing, 'trajectory': _arg('trajectory')},
         'controller_node': {**timing, 'plant': _arg('plant'), 'mode': _arg('mode'),
                             'feedforward': _arg('feedforward'),
-                            'autostart': _arg('autostart', bool)},
+                            'autostart': _arg('autostart', bool), 'model_dir': _arg('model_dir')},
         'recorder_node': {'timing': _arg('timing'), 'output': _arg('output'),
-                          'autostart': _arg('autostart', bool)},
+                          'autostart': _arg('autostart', bool), 'model_dir': _arg('model_dir')},
     }
     actions = [DeclareLaunchArgument(name, default_value=default, description=text)
                for name, (default, text) in ARGS.items()]

@@ -26,6 +26,16 @@ class ModelFileError(MotorCompError):
     """A model file is malformed: unknown effect, missing field, bad value."""
 
 
+class LimitTripError(MotorCompError):
+    """The axis broke a limit (travel, speed, acceleration, voltage, tracking error).
+
+    The controller stopped it (0 V); the message names the limit, the value and the
+    time.  Exit status 3, distinct from a user error (2).
+    """
+
+    exit_code = 3
+
+
 def check_finite(name: str, value: float) -> float:
     """Return ``float(value)`` or raise :class:`ParameterError` naming ``name``."""
     try:

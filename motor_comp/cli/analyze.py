@@ -7,6 +7,11 @@ the first), or with ``--json`` one object ``{"runs": [...]}`` (DESIGN.md §6 key
 Without ``--report`` the metrics are computed by streaming the file
 (:mod:`motor_comp.analysis.streaming`): memory does not grow with the run length.
 The figures of ``--report`` need the whole series, so that option reads them into memory.
+
+A run recorded with ``/diagnostics`` (``motor-comp run --monitor``, or with limits)
+also gets ``monitor`` (the model monitor's verdicts: counts per level, worst force
+NRMSE, the candidate effect) and ``limits`` (armed limits, the trip) keys
+(:mod:`motor_comp.analysis.diagnostics`).
 """
 from __future__ import annotations
 
@@ -54,6 +59,9 @@ def run(args: argparse.Namespace) -> int:
 
     from motor_comp.analysis.streaming import stream_metrics
 
+    from motor_comp.analysis.diagnostics import summarise
+    from motor_comp.logs.diagnostics import read_diagnostics
+
     progress = bool(args.progress or sys.stderr.isatty())
     runs, metrics = [], []
     for path in args.runs:
@@ -73,6 +81,8 @@ def run(args: argparse.Namespace) -> int:
                                            chatter_cutoff=args.chatter_cutoff))
         except ParameterError as exc:
             raise ParameterError(f'{path}: {exc}') from None
+    # after the metrics: a bad file is reported by the reader of the loop's topics
+    args.diagnostics = [summarise(read_diagnostics(path)) for path in args.runs]
     report = None
     if args.report:
         try:
@@ -83,7 +93,11 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         _write_json(args, metrics, report, relative_change)
     else:
+        from motor_comp.analysis.diagnostics import format_summary
         print(format_table(metrics))
+        for path, summary in zip(args.runs, args.diagnostics):
+            for line in format_summary(summary):
+                print(f'{path}: {line}')
         if report is not None:
             print(f'report: {report}')
     return 0
@@ -106,6 +120,7 @@ def _write_json(args: argparse.Namespace, metrics: list, report: Any,
         d = m.as_dict(records=False)
         d['path'] = str(path)
         d['relative_to_first'] = relative_change(metrics[0], m)
+        d.update(args.diagnostics[i])
         out.write((', ' if i else '') + dump(d)[:-1])
         for name, items in m.records():
             out.write(f', {json.dumps(name)}: [')

@@ -1,10 +1,25 @@
 """``motor-comp run``: the four ROS 2 nodes as separate processes, one recorded run.
 
 No ``ros2 launch`` needed (the PyPI ROS wheels have no launch): this module starts
-``recorder_node``, ``controller_node``, ``trajectory_node`` and ``plant_node`` with
-``python -m motor_comp.nodes.<name> --ros-args --params-file <generated yaml>``, waits
-for the plant to finish ``--duration`` of sim time, stops the others with SIGINT (the
-recorder finalises its MCAP), and prints the metrics of the recorded file.
+``recorder_node``, ``controller_node``, ``trajectory_node`` and ``plant_node`` (and
+``monitor_node`` with ``--monitor MODEL.yaml``) with ``python -m motor_comp.nodes.<name>
+--ros-args --params-file <generated yaml>``, waits for the plant to finish
+``--duration`` of sim time, stops the others with SIGINT (the recorder finalises its
+MCAP), and prints the metrics of the recorded file (with ``--monitor``, the monitor's
+verdicts recorded from ``/diagnostics``).
+
+Limits (``--travel MIN MAX``, ``--vmax``, ``--amax``, ``--umax``, ``--max-error``): a
+trajectory beyond them is refused before any process starts; during the run the
+controller trips on them (0 V from then on, exit status 3 after ``trip_hold``), the
+run stops, the recording is finalised and kept, and ``motor-comp run`` ends with the
+controller's one-line reason (exit status 3).
+
+Files: the nodes may read files only inside their ``model_dir``; the run sets it to the
+working directory, the package ``config/`` and the directories of the files named on
+its command line (``--plant FILE``, ``--monitor MODEL``).  The recorder only creates new
+files: when ``-o`` exists it writes ``<stem>.partial-<pid>.mcap`` next to it, moved onto
+``-o`` when the run ends or trips (a run that fails otherwise leaves the old ``-o`` as
+it was and names the partial file in its error).
 
 :class:`NodeGroup` (process start, wait, clean stop — also on errors) is shared with
 ``motor-comp demo`` and the node tests.
@@ -15,6 +30,7 @@ import argparse
 import dataclasses
 import itertools
 import json
+import math
 import os
 import signal
 import subprocess
@@ -26,11 +42,15 @@ from typing import Any, Mapping, Sequence
 
 import yaml
 
-from motor_comp.cli.common import add_json, check_output_file, positive_float
-from motor_comp.errors import MotorCompError, ParameterError
+from motor_comp.cli.common import add_json, check_output_file, finite_float, jsonable, \
+    positive_float
+from motor_comp.control.limits import Limits
+from motor_comp.errors import LimitTripError, MotorCompError, ParameterError
 from motor_comp.nodes import PARENT_ENV
 
 NODES = ('recorder_node', 'controller_node', 'trajectory_node', 'plant_node')
+#: exit status of a controller process that tripped a limit (controller_node)
+TRIP_EXIT_STATUS = 3
 MODES = ('pid', 'adaptive_sliding', 'npid')
 FEEDFORWARDS = ('none', 'static', 'gms', 'static+gms')
 _counter = itertools.count()
@@ -139,8 +159,17 @@ def write_params_file(path: Path, params: Mapping[str, Mapping[str, Any]],
     """Write ``{node: {param: value}}`` as a ROS 2 params file (``/ns/node`` keys)."""
     data = {f'/{namespace}/{node}': {'ros__parameters': dict(values)}
             for node, values in params.items()}
-    path.write_text(yaml.safe_dump(data, sort_keys=False), encoding='utf-8')
+    path.write_text(yaml.dump(data, Dumper=_NoAliasDumper, sort_keys=False),
+                    encoding='utf-8')
     return path
+
+
+class _NoAliasDumper(yaml.SafeDumper):
+    """Write a value shared by two nodes twice: rcl's params parser refuses YAML aliases."""
+
+    def ignore_aliases(self, data: Any) -> bool:
+        """Never write an alias."""
+        return True
 
 
 @dataclasses.dataclass
@@ -252,7 +281,8 @@ class NodeGroup:
 
     def __exit__(self, *exc: Any) -> None:
         # stop the loop's drivers first so the recorder sees a quiet graph when it drains
-        self.stop_all(['plant_node', 'trajectory_node', 'controller_node', 'recorder_node'])
+        self.stop_all(['plant_node', 'trajectory_node', 'monitor_node', 'controller_node',
+                       'recorder_node'])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -271,85 +301,206 @@ class RunSpec:
     namespace: str = 'axis'
     #: realtime: SCHED_FIFO priority of the plant, trajectory and controller (0 = off)
     realtime_priority: int = 0
+    #: the axis limits (controller trips, trajectory refuses); none by default
+    limits: Limits = dataclasses.field(default_factory=Limits)
+    #: a model file for ``monitor_node`` ('' = no monitor)
+    monitor: str = ''
     extra_params: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
+
+    @property
+    def trajectory_kind(self) -> str:
+        """The trajectory this run plays (p2p on the PMLM, sine otherwise, by default)."""
+        return self.trajectory or ('p2p' if self.plant == 'pmlm' else 'sine')
+
+    def model_dirs(self) -> list[str]:
+        """Return the directories the nodes may read files from (``model_dir``).
+
+        The working directory and the package ``config/`` (the nodes' defaults), and
+        the directories of the files this run names (a plant file, the monitor's model).
+        """
+        from motor_comp.param_files import default_dirs
+        dirs = [str(d) for d in default_dirs()]
+        for f in (self.plant if self.plant not in ('pmlm', 'ballscrew') else '',
+                  self.monitor):
+            if f:
+                d = str(Path(f).expanduser().resolve().parent)
+                if d not in dirs:
+                    dirs.append(d)
+        return dirs
 
     def node_params(self) -> dict[str, dict[str, Any]]:
         """Return the parameters of each node for this run."""
         from motor_comp.control.trajectories import make_trajectory
-        traj = self.trajectory or ('p2p' if self.plant == 'pmlm' else 'sine')
+        traj = self.trajectory_kind
         # the plant starts at rest on the reference, as the in-process simulator does
         x0 = make_trajectory(traj).at(0.0).position
         common = {'timing': self.timing, 'control_rate': float(self.control_rate),
                   'realtime_priority': int(self.realtime_priority)}
+        files = {'model_dir': os.pathsep.join(self.model_dirs())}
+        monitor = 1 if self.monitor else 0
         params = {
-            'plant_node': {**common, 'plant': self.plant, 'duration': float(self.duration),
+            'plant_node': {**common, **files, 'plant': self.plant,
+                           'duration': float(self.duration),
                            'seed': int(self.seed), 'x0': float(x0),
                            # joint_states readers: controller, recorder (+ the realtime
-                           # trajectory, which takes its time origin from it)
-                           'expected_subscribers': 3 if self.timing == 'realtime' else 2},
+                           # trajectory, which takes its time origin from it, + the
+                           # monitor, which pairs every sample with its command)
+                           'expected_subscribers': (3 if self.timing == 'realtime' else 2)
+                           + monitor},
             'trajectory_node': {**common, 'trajectory': traj,
                                 'duration': float(self.duration)},
-            'controller_node': {**common, 'plant': self.plant, 'mode': self.controller,
-                                'feedforward': self.feedforward},
-            'recorder_node': {'output': str(self.output), 'timing': self.timing},
+            'controller_node': {**common, **files, 'plant': self.plant,
+                                'mode': self.controller, 'feedforward': self.feedforward},
+            'recorder_node': {**files, 'output': str(self.output), 'timing': self.timing},
         }
+        if self.limits.active:
+            lim = self.limits
+            motion = {'travel': [float(v) for v in lim.travel], 'vmax': lim.vmax,
+                      'amax': lim.amax}
+            params['trajectory_node'].update(motion)
+            # its limits status (armed, a trip) reaches the recorder from the start on
+            params['controller_node'].update(motion, umax=lim.umax,
+                                             max_error=lim.max_error, exit_on_trip=True,
+                                             diagnostics_readers=1)
+        if self.monitor:
+            params['monitor_node'] = {**files, 'model': str(Path(self.monitor).resolve()),
+                                      'timing': self.timing, 'diagnostics_readers': 1}
+            # voltage readers: plant, recorder, monitor
+            params['controller_node']['expected_subscribers'] = 3
+            params['recorder_node']['nodes'] = ('plant_node,trajectory_node,'
+                                                'controller_node,monitor_node')
         for node, values in self.extra_params.items():
             params.setdefault(node, {}).update(values)
         return params
 
 
+def _partial_path(out: Path) -> Path:
+    """Return a new file next to ``out`` for the recorder (it never overwrites a file)."""
+    for i in itertools.count():
+        tag = f'{os.getpid()}' + (f'-{i}' if i else '')
+        tmp = out.with_name(f'{out.stem}.partial-{tag}{out.suffix or ".mcap"}')
+        if not os.path.lexists(tmp):
+            return tmp
+    raise AssertionError('unreachable')
+
+
+def _trip_reason(proc: NodeProcess) -> str:
+    """Return the controller's one-line trip reason (its ``<node>: error: …`` line)."""
+    try:
+        lines = proc.log.read_text(errors='replace').splitlines()
+    except OSError:
+        lines = []
+    marker = f'{proc.name}: error: '
+    reason = next((ln.split(marker, 1)[1] for ln in reversed(lines) if marker in ln), '')
+    return reason or f'limit trip ({proc.tail()})'
+
+
 def run_nodes(spec: RunSpec, *, workdir: Path | None = None, timeout: float | None = None,
               domain_id: int | None = None, progress: bool = True) -> Path:
-    """Run the four nodes for ``spec`` and return the recorded MCAP path.
+    """Run the nodes for ``spec`` and return the recorded MCAP path.
 
     Raises :class:`NodeProcessError` (one line, with the failing node's last output)
-    if a node exits early or the run does not finish within ``timeout`` seconds.
+    if a node exits early or the run does not finish within ``timeout`` seconds, and
+    :class:`LimitTripError` (the controller's one-line reason) after a limit trip — the
+    recording, finalised up to the stop, is at ``spec.output`` in both the normal and
+    the trip case.
     """
+    from motor_comp.control.limits import check_reference
+    from motor_comp.control.trajectories import make_trajectory
     require_ros('running the ROS 2 nodes')
     # the recorder would only fail after every node has started: check the path first
     out = check_output_file(spec.output, '-o')
+    # a reference beyond the limits is refused before anything starts
+    check_reference(make_trajectory(spec.trajectory_kind), spec.limits,
+                    duration=spec.duration, rate=spec.control_rate)
     if timeout is None:
         timeout = 60.0 + 20.0 * spec.duration
+    # the recorder only creates new files: an existing -o is replaced at the end
+    partial = _partial_path(out) if os.path.lexists(out) else out
+    spec = dataclasses.replace(spec, output=partial)
     with tempfile.TemporaryDirectory(prefix='motor_comp_run_') as tmp:
         work = Path(workdir or tmp)
         ns = spec.namespace.strip('/')
         if not ns or not all(part.isidentifier() for part in ns.split('/')):
             raise ParameterError(f'namespace must be a ROS name like axis or arm/x, '
                                  f'got {spec.namespace!r}')
-        params_file = write_params_file(work / 'params.yaml', spec.node_params(),
-                                        namespace=ns)
+        node_params = spec.node_params()
+        params_file = write_params_file(work / 'params.yaml', node_params, namespace=ns)
         env = ros_environment(domain_id)
         t0 = time.monotonic()
-        with NodeGroup(work, env) as group:
-            for node in NODES:
-                group.start(node, params_file, ['-r', f'__ns:=/{ns}'])
-            if progress:
-                print(f'motor-comp run: {spec.plant}/{spec.controller}/{spec.feedforward} '
-                      f'{spec.timing} {spec.duration:g} s (ROS_DOMAIN_ID '
-                      f'{env["ROS_DOMAIN_ID"]}) …', file=sys.stderr)
-            code = group.wait('plant_node', timeout)
-            if code != 0:
-                raise NodeProcessError(f'plant_node exited with status {code}: '
-                                       f'{group.procs["plant_node"].tail()}')
-            statuses = group.stop_all(['trajectory_node', 'controller_node',
-                                       'recorder_node'])
-            if statuses.get('recorder_node', 0) != 0:
-                raise NodeProcessError(f'recorder_node exited with status '
-                                       f'{statuses["recorder_node"]}: '
-                                       f'{group.procs["recorder_node"].tail()}')
+        tripped: str | None = None
+        try:
+            with NodeGroup(work, env) as group:
+                for node in (*NODES, *(['monitor_node'] if 'monitor_node' in node_params
+                                       else [])):
+                    group.start(node, params_file, ['-r', f'__ns:=/{ns}'])
+                if progress:
+                    print(f'motor-comp run: {spec.plant}/{spec.controller}/'
+                          f'{spec.feedforward} {spec.timing} {spec.duration:g} s '
+                          f'(ROS_DOMAIN_ID {env["ROS_DOMAIN_ID"]}) …', file=sys.stderr)
+                code = _wait_for_end(group, timeout)
+                if code is not None and code != 0:
+                    raise NodeProcessError(f'plant_node exited with status {code}: '
+                                           f'{group.procs["plant_node"].tail()}')
+                statuses = group.stop_all(['plant_node', 'trajectory_node', 'monitor_node',
+                                           'controller_node', 'recorder_node'])
+                if statuses.get('controller_node') == TRIP_EXIT_STATUS:
+                    tripped = _trip_reason(group.procs['controller_node'])
+                if statuses.get('recorder_node', 0) != 0:
+                    raise NodeProcessError(f'recorder_node exited with status '
+                                           f'{statuses["recorder_node"]}: '
+                                           f'{group.procs["recorder_node"].tail()}')
+        except MotorCompError as exc:
+            if partial != out and os.path.exists(partial):   # the old -o stays as it was
+                raise type(exc)(f'{exc} (what was recorded is in {partial})') from None
+            raise
+        if partial != out:
+            os.replace(partial, out)   # the run ended or tripped: its recording is -o
         if progress:
             print(f'motor-comp run: done in {time.monotonic() - t0:.1f} s wall → {out}',
                   file=sys.stderr)
+    if tripped is not None:
+        raise LimitTripError(f'{tripped} (the axis was stopped at 0 V; the recording up to '
+                             f'the stop is {out})')
     return out
 
 
+def _wait_for_end(group: NodeGroup, timeout: float) -> int | None:
+    """Wait for the plant to finish or the controller to stop on a trip.
+
+    Returns the plant's exit status, or None when the controller exited after a limit
+    trip (status :data:`TRIP_EXIT_STATUS`).  Any other node exiting is a
+    :class:`NodeProcessError`.
+    """
+    plant, ctl = group.procs['plant_node'], group.procs['controller_node']
+    deadline = time.monotonic() + timeout
+    while True:
+        code = plant.popen.poll()
+        if code is not None:
+            return code
+        if ctl.popen.poll() == TRIP_EXIT_STATUS:
+            return None
+        group.check_alive(except_=('plant_node',))
+        if time.monotonic() > deadline:
+            raise NodeProcessError(f'plant_node did not finish within {timeout:g} s '
+                                   f'(last output: {plant.tail()})')
+        time.sleep(0.05)
+
+
 def metrics_row(path: Path, namespace: str = 'axis') -> dict[str, Any]:
-    """Read a recorded run and compute its metrics (DESIGN.md §6 keys) plus its name."""
+    """Read a recorded run and compute its metrics (DESIGN.md §6 keys) plus its name.
+
+    A run with ``/diagnostics`` also gets the ``monitor`` / ``limits`` summaries
+    (:mod:`motor_comp.analysis.diagnostics`).
+    """
+    from motor_comp.analysis.diagnostics import summarise
     from motor_comp.analysis.metrics import compute_metrics
     from motor_comp.logs import read_run
+    from motor_comp.logs.diagnostics import read_diagnostics
     run = read_run(path, namespace=namespace.strip('/'))
     row = {'name': run.name, 'path': str(path)}
     row.update(compute_metrics(run).as_dict())
+    row.update(summarise(read_diagnostics(path)))
     return row
 
 
@@ -395,6 +546,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help='realtime mode: SCHED_FIFO priority 1..98 of the plant, trajectory '
                         'and controller processes (default 40 where permitted, else normal '
                         'scheduling with a warning; 0 = off)')
+    lim = p.add_argument_group(
+        'limits', 'enforced by the nodes: a trajectory beyond them is refused before the '
+        'run; during it the controller trips (0 V), the run stops and ends with a one-line '
+        'error (exit status 3), the recording kept; units of the axis (m or rad)')
+    lim.add_argument('--travel', nargs=2, type=finite_float, metavar=('MIN', 'MAX'),
+                     help='travel limits of the position [m]')
+    lim.add_argument('--vmax', type=positive_float, metavar='V', help='speed limit [m/s]')
+    lim.add_argument('--amax', type=positive_float, metavar='A',
+                     help='acceleration limit [m/s²]')
+    lim.add_argument('--umax', type=positive_float, metavar='U',
+                     help='voltage limit: the law asking for more trips [V]')
+    lim.add_argument('--max-error', type=positive_float, metavar='E',
+                     help='tracking-error limit |x_ref − x| [m]')
+    p.add_argument('--monitor', metavar='MODEL.yaml', default='',
+                   help='also run monitor_node on this model; its /diagnostics are '
+                        'recorded and summarised (JSON key monitor)')
     p.add_argument('-o', '--output', required=True, type=Path, help='RUN.mcap to write')
     add_json(p, help='print one JSON object')
     p.set_defaults(func=run)
@@ -412,18 +579,30 @@ def run(args: argparse.Namespace) -> int:
         prio = DEFAULT_RT_PRIORITY if args.mode == 'realtime' else 0
     if not 0 <= prio <= 98:
         raise ParameterError(f'--rt-priority must be in 0..98, got {prio}')
+    from motor_comp.physics.axis import AxisModel
     from motor_comp.physics.config import load_plant
     load_plant(args.plant)   # a bad plant name/file is a one-line error before any process
+    if args.monitor:
+        AxisModel.load(args.monitor)   # and a bad monitor model
+    travel = tuple(args.travel) if args.travel else (-math.inf, math.inf)
+    if not travel[0] < travel[1]:
+        raise ParameterError(f'--travel: expected MIN < MAX, got {travel[0]:g} {travel[1]:g}')
+    limits = Limits(travel=travel, vmax=args.vmax or math.inf, amax=args.amax or math.inf,
+                    umax=args.umax or math.inf, max_error=args.max_error or math.inf)
     spec = RunSpec(output=args.output, plant=args.plant, controller=args.controller,
                    feedforward=args.feedforward, trajectory=args.trajectory,
                    timing=args.mode, duration=args.duration, control_rate=args.rate,
-                   seed=args.seed, namespace=args.namespace, realtime_priority=prio)
+                   seed=args.seed, namespace=args.namespace, realtime_priority=prio,
+                   limits=limits, monitor=args.monitor)
     path = run_nodes(spec, timeout=args.timeout, domain_id=args.domain_id)
     row = metrics_row(path, args.namespace)
     row.update(plant=args.plant, controller=args.controller, feedforward=args.feedforward,
                mode=args.mode)
     if args.json:
-        print(json.dumps({'runs': [row]}))
+        print(json.dumps(jsonable({'runs': [row]})))
     else:
+        from motor_comp.analysis.diagnostics import format_summary
         print_table([row], label='name')
+        for line in format_summary(row):
+            print(line)
     return 0

@@ -451,6 +451,16 @@ def read_table(path: str | Path) -> PositionTable:
         raise InputFileError(f'{path}: is a directory, expected a table CSV') from None
     except (OSError, UnicodeDecodeError) as exc:
         raise InputFileError(f'{path}: cannot read compensation table ({exc})') from None
+    return table_from_text(text, source=str(path))
+
+
+def table_from_text(text: str, *, source: str = 'table') -> PositionTable:
+    """Parse the text of a table CSV (already read); errors name ``source``.
+
+    The entry point for text read under rules of its own (``controller_node`` reads the
+    file ``compensation_table`` names with :mod:`motor_comp.param_files`).
+    """
+    path = source
     header: dict[str, str] = {}
     rows: list[list[str]] = []
     for i, line in enumerate(text.splitlines(), 1):
@@ -514,7 +524,7 @@ def read_table(path: str | Path) -> PositionTable:
                          units={'position': pos_unit, 'force': force_unit,
                                 'command': cmd_unit},
                          effects=tuple(header.get('effects', '').split()),
-                         source=header.get('source_model', str(path)))
+                         source=header.get('source_model', source))
 
 
 def from_table(table: PositionTable, *, source: str = 'table') -> Compensation:
@@ -548,4 +558,5 @@ def load(path: str | Path) -> Compensation:
 __all__ = ['COMPENSABLE', 'NOT_COMPENSABLE', 'POSITION_EFFECTS', 'Compensation',
            'CompensationKind', 'PositionTable', 'compensation_command',
            'compensation_force', 'from_model', 'from_table', 'load', 'load_model',
-           'load_table', 'position_table', 'read_table', 'table_period', 'write_table']
+           'load_table', 'position_table', 'read_table', 'table_from_text', 'table_period',
+           'write_table']

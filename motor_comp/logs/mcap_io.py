@@ -88,8 +88,9 @@ class _Unbuffered:
     with SIGKILL leaves a file readable up to its last complete chunk.
     """
 
-    def __init__(self, path: str | os.PathLike) -> None:
-        self._raw = open(path, 'wb', buffering=0)
+    def __init__(self, path: str | os.PathLike, *, exclusive: bool = False) -> None:
+        # 'x': O_CREAT | O_EXCL, which also refuses a symbolic link at the path
+        self._raw = open(path, 'xb' if exclusive else 'wb', buffering=0)
 
     def write(self, data: bytes) -> int:
         view = memoryview(data)
@@ -177,7 +178,11 @@ class McapRecorder:
     Parameters
     ----------
     path : path-like
-        Output file (overwritten).
+        Output file (overwritten, unless ``exclusive``).
+    exclusive : bool
+        Create the file only if nothing (no file, no symbolic link) is at ``path``; an
+        existing one is an :class:`InputFileError` (the recorder node's rule: an output
+        parameter cannot clobber a file).
     chunk_size : int
         Uncompressed bytes per chunk [B].
     compression : {'zstd', 'lz4', 'none'}
@@ -187,13 +192,17 @@ class McapRecorder:
     """
 
     def __init__(self, path: str | os.PathLike, *, chunk_size: int = 256 * 1024,
-                 compression: str = 'zstd', flush_interval: float = 1.0) -> None:
+                 compression: str = 'zstd', flush_interval: float = 1.0,
+                 exclusive: bool = False) -> None:
         from mcap.writer import Writer
         if chunk_size <= 0:
             raise ParameterError(f'chunk_size must be > 0, got {chunk_size}')
         self.path = Path(path)
         try:
-            self._file = _Unbuffered(self.path)
+            self._file = _Unbuffered(self.path, exclusive=exclusive)
+        except FileExistsError:
+            raise InputFileError(f'{self.path}: exists; refused (an output is always a new '
+                                 'file, never overwritten)') from None
         except OSError as exc:
             raise InputFileError(f'{self.path}: cannot write ({exc.strerror})') from None
         self._writer = Writer(self._file, chunk_size=int(chunk_size),

@@ -51,6 +51,33 @@ builtin_interfaces/Time clock
 """
 
 
+_DIAGNOSTIC_ARRAY = """\
+# Diagnostic information about the state of the robot (motor_comp: the live model
+# monitor's verdicts and the controller's limits, each one DiagnosticStatus).
+std_msgs/Header header
+DiagnosticStatus[] status
+"""
+
+_DIAGNOSTIC_STATUS = """\
+# Status of one component.
+byte OK=0
+byte WARN=1
+byte ERROR=2
+byte STALE=3
+byte level
+string name
+string message
+string hardware_id
+KeyValue[] values
+"""
+
+_KEY_VALUE = """\
+# A labelled value.
+string key
+string value
+"""
+
+
 def _concat(main: str, *deps: tuple[str, str]) -> str:
     parts = [main.rstrip('\n')]
     for name, text in deps:
@@ -61,6 +88,7 @@ def _concat(main: str, *deps: tuple[str, str]) -> str:
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 FLOAT64 = 'std_msgs/msg/Float64'
 CLOCK = 'rosgraph_msgs/msg/Clock'
+DIAGNOSTIC_ARRAY = 'diagnostic_msgs/msg/DiagnosticArray'
 
 #: full ros2msg schema text per message type (with dependencies, as rosbag2 writes it)
 DEFINITIONS: Mapping[str, str] = {
@@ -68,6 +96,10 @@ DEFINITIONS: Mapping[str, str] = {
                          ('builtin_interfaces/Time', _TIME)),
     FLOAT64: _concat(_FLOAT64),
     CLOCK: _concat(_CLOCK, ('builtin_interfaces/Time', _TIME)),
+    DIAGNOSTIC_ARRAY: _concat(_DIAGNOSTIC_ARRAY, ('std_msgs/Header', _HEADER),
+                              ('builtin_interfaces/Time', _TIME),
+                              ('diagnostic_msgs/DiagnosticStatus', _DIAGNOSTIC_STATUS),
+                              ('diagnostic_msgs/KeyValue', _KEY_VALUE)),
 }
 
 #: ROS 2 Jazzy type description hashes (from the installed interface packages)
@@ -75,6 +107,8 @@ TYPE_HASHES: Mapping[str, str] = {
     JOINT_STATE: 'RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e',
     FLOAT64: 'RIHS01_705ba9c3d1a09df43737eb67095534de36fd426c0587779bda2bc51fe790182a',
     CLOCK: 'RIHS01_692f7a66e93a3c83e71765d033b60349ba68023a8c689a79e48078bcb5c58564',
+    DIAGNOSTIC_ARRAY:
+        'RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e',
 }
 
 _INFINITE = '    sec: 9223372036\n    nsec: 854775807\n'

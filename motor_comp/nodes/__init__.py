@@ -11,6 +11,10 @@ controller_node    ``Controller.step`` → ``controller_step``    sub ``referenc
                                                                 ``joint_states``; pub
                                                                 ``voltage``
 recorder_node      ``McapRecorder.write_cdr`` (raw CDR)         sub all of the above
+                                                                and ``/diagnostics``
+monitor_node       ``workbench.monitor.window_health``          sub ``joint_states``,
+                                                                ``voltage``; pub
+                                                                ``/diagnostics``
 =================  ===========================================  ======================
 
 Topics live in the namespace ``axis`` (``--ros-args -r __ns:=/other`` for another

@@ -243,6 +243,8 @@ class Param:
         Allowed string values.
     read_only : bool
         Fixed after start (structure of the run, not a tuning knob).
+    allow_inf : bool
+        ``±inf`` is a value (a limit's "no limit"); NaN never is.
     """
 
     name: str
@@ -253,6 +255,7 @@ class Param:
     high: float | None = None
     choices: tuple[str, ...] = ()
     read_only: bool = False
+    allow_inf: bool = False
 
     def descriptor(self) -> ParameterDescriptor:
         """Build the ROS descriptor: description with unit and choices, numeric range."""
@@ -306,7 +309,8 @@ class Param:
             raise ParameterError(f'{self.name}: expected {kind.__name__}, '
                                  f'got {type(value).__name__} {value!r}')
         if kind is float and not math.isfinite(value) and not (
-                value == math.inf and self.high == math.inf):   # e.g. u_max = inf: no limit
+                value == math.inf and self.high == math.inf) and not (
+                self.allow_inf and not math.isnan(value)):   # e.g. u_max = inf: no limit
             raise ParameterError(f'{self.name}: must be finite, got {value!r}')
         if self.low is not None and value < self.low:
             raise ParameterError(f'{self.name}: {value!r} is below the minimum {self.low:g}'
@@ -317,6 +321,44 @@ class Param:
         if self.choices and value not in self.choices:
             raise ParameterError(f'{self.name}: {value!r} is not one of '
                                  f'{", ".join(self.choices)}')
+
+
+#: shared by the nodes that read files their parameters name (param_files rules)
+MODEL_DIR = Param(
+    'model_dir', '', 'Directories the file parameters of this node may name, '
+    '":"-separated; a path outside them (symbolic links followed) is refused without '
+    'being opened, and only regular files under 16 MiB are read. Empty = the working '
+    'directory and the package config/', read_only=True)
+
+#: the motion limits (:mod:`motor_comp.control.limits`), shared by the trajectory node
+#: (which refuses a reference beyond them) and the controller (which trips on them).
+#: Read-only: a safety limit is fixed when the node starts, never loosened from the graph
+MOTION_LIMITS = (
+    Param('travel', (-math.inf, math.inf), 'Travel limits [min, max] of the position '
+          '(-inf/inf = none)', 'm or rad', read_only=True, allow_inf=True),
+    Param('vmax', math.inf, 'Speed limit |v| (inf = none)', 'm/s or rad/s', 1e-12,
+          math.inf, read_only=True),
+    Param('amax', math.inf, 'Acceleration limit |a| (inf = none)', 'm/s^2 or rad/s^2',
+          1e-12, math.inf, read_only=True),
+)
+
+
+#: nodes that publish on /diagnostics (monitor, controller with limits): who must hear
+#: them before the loop starts (the recorder), as the loop's own writers wait for theirs
+DIAGNOSTICS_READERS = Param(
+    'diagnostics_readers', 0, 'Readers of /diagnostics (e.g. the recorder) that must have '
+    'matched this node\'s status writer before it joins the loop, so none misses a status '
+    '(after 10 s it goes on with a warning)', '', 0, 100, read_only=True)
+
+
+def limits_from(p: Mapping[str, Any]) -> Any:
+    """Return the :class:`~motor_comp.control.limits.Limits` of a node's parameters.
+
+    Raises :class:`ParameterError` for an invalid travel (``min < max``) or bound.
+    """
+    from motor_comp.control.limits import Limits
+    return Limits(travel=p['travel'], vmax=p['vmax'], amax=p['amax'],
+                  umax=p.get('umax', math.inf), max_error=p.get('max_error', math.inf))
 
 
 #: shared by the realtime-capable nodes (plant, trajectory, controller)
@@ -368,6 +410,10 @@ class ParamNode(Node):
     #: arrival order across topics (a realtime recorder or monitor pairs a command with
     #: the newest measurement *taken*, so a burst of one topic first would shift it)
     take_burst: int = 64
+    #: process exit status after a clean stop (0; the controller's limit trip: 3) and
+    #: the one line :func:`run_node` prints with it (``<node>: error: <exit_reason>``)
+    exit_status: int = 0
+    exit_reason: str = ''
 
     def mark_hot(self, entity: Any) -> Any:
         """Mark a subscription or timer as hot (served by the lean loop); return it."""
@@ -419,6 +465,15 @@ class ParamNode(Node):
 
     def apply_params(self, changed: Mapping[str, Any], new: Mapping[str, Any]) -> None:
         """Apply accepted changes; raise :class:`ParameterError` to reject them."""
+
+    @property
+    def file_dirs(self) -> tuple[Path, ...]:
+        """Return the directories the node's file parameters may name (``model_dir``)."""
+        from motor_comp.param_files import parse_dirs
+        dirs = getattr(self, '_file_dirs', None)
+        if dirs is None:   # resolved once: a later chdir cannot widen them
+            dirs = self._file_dirs = parse_dirs(self.p['model_dir'])
+        return dirs
 
     def finish(self, executor: rclpy.executors.Executor | None) -> None:
         """Run once on shutdown before the node is destroyed (drain, flush files).
@@ -836,7 +891,8 @@ def run_node(factory: Callable[[], ParamNode], argv: Iterable[str] | None = None
     rclpy's own signal handler would tear the context down under our feet (then a
     recorder could not drain its queue); we install ours and stop the loop ourselves.
     Returns the process exit status: 0 on a clean stop, 2 on a user error (printed as
-    one line naming the parameter), never a traceback.
+    one line naming the parameter), the node's ``exit_status`` with its one-line
+    ``exit_reason`` (a limit trip of the controller: 3), never a traceback.
     """
     stop = _Stop()
     prog = Path(sys.argv[0]).stem
@@ -898,6 +954,7 @@ def run_node(factory: Callable[[], ParamNode], argv: Iterable[str] | None = None
         why = (signal.Signals(stop.signal).name if stop.signal
                else 'parent gone' if stop.event.is_set() else 'done')
         node.get_logger().info(f'stopping ({why})')
+        status = node.exit_status   # e.g. 3: a limit trip (its line is printed last)
         if profile is not None:
             profile.disable()
             try:
@@ -919,4 +976,6 @@ def run_node(factory: Callable[[], ParamNode], argv: Iterable[str] | None = None
                 node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
+    if clean and status:
+        print(f'{prog}: error: {node.exit_reason}', file=sys.stderr, flush=True)
     return status

@@ -64,28 +64,53 @@ Reliability (issue 8):
   reference state in any mode (:mod:`motor_comp.control.compensation`); set at run time
   the file is loaded and validated first — a bad file is rejected with the reason and
   the old compensation stays — and switched in bumplessly (the integrator re-balanced).
+  The files (and a ``plant`` YAML) are read under :mod:`motor_comp.param_files`: only
+  inside ``model_dir`` (read-only), only regular files under a size bound, and a
+  rejection reason never quotes the file.
+
+Limits (issue 24, :mod:`motor_comp.control.limits`): ``travel`` [min, max], ``vmax``,
+``amax``, ``umax`` and ``max_error`` (read-only; infinite = none, the default).  Every
+command is checked by a :class:`~motor_comp.control.limits.Guard` against the
+reference, the measurement and the law's command; the first break is a *trip*: from
+that command on the node commands 0 V (latched until it is configured again — lifecycle
+cleanup + configure — or restarted), logs one error line with the cause and the values,
+publishes an ERROR ``DiagnosticStatus`` (``motor_comp/<ns>: limits``, stamped with the
+measurement that broke the limit; an OK one with the limits at the first command) on
+``/diagnostics`` (the reason's time ``t`` is sim time in lockstep, the time since the
+first sample answered in realtime, whose stamps are wall-clock based), and exits with
+status 3 and the cause as its last line — after ``trip_hold`` more seconds of 0 V with
+``exit_on_trip`` (as ``motor-comp run`` starts it), else when it is stopped.
 """
 from __future__ import annotations
 
 import dataclasses
 import math
 import time
-from typing import Any, Mapping
+from pathlib import Path
+from typing import Any, Mapping, Sequence
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
+from motor_comp import param_files
 from motor_comp.control import compensation
 from motor_comp.control.controller import ControlMode, Feedforward, default_params, \
     make_controller
+from motor_comp.control.limits import Guard, Trip
 from motor_comp.errors import ParameterError
-from motor_comp.nodes.common import DEFAULT_NAMESPACE, DELAY_BIN_NS, DELAY_BINS, LOOP_QOS, \
-    REALTIME_PRIORITY, SUB_QOS, TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, \
-    ManagedNode, Pacer, Param, Timing, format_delays, read_joint_state, run_node, \
-    set_realtime_priority
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, DELAY_BIN_NS, DELAY_BINS, \
+    DIAGNOSTICS_READERS, LOOP_QOS, MODEL_DIR, MOTION_LIMITS, REALTIME_PRIORITY, SUB_QOS, \
+    TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, ManagedNode, Pacer, Param, Timing, \
+    format_delays, limits_from, read_joint_state, run_node, set_realtime_priority, set_stamp
 from motor_comp.control.nominal import derive_nominal
-from motor_comp.physics.config import PlantConfig, load_plant
+from motor_comp.physics.config import PlantConfig
+
+#: exit status of a node process whose controller tripped a limit (distinct from 2, a
+#: user error); ``motor-comp run`` turns it into its one-line error
+TRIP_EXIT_STATUS = 3
 
 BASE_PARAMS = (
     Param('plant', 'pmlm', 'Nominal plant: pmlm, ballscrew, or a plant YAML file',
@@ -113,10 +138,30 @@ BASE_PARAMS = (
           'misses the first commands (after 10 s it goes on with a warning)', '', 0, 100,
           read_only=True),
     REALTIME_PRIORITY,
+    MODEL_DIR,
+) + MOTION_LIMITS + (
+    Param('umax', math.inf, 'Voltage limit: a command of the law beyond ±umax trips (inf = '
+          'none; <mode>.u_max is the law\'s own saturation)', 'V', 1e-12, math.inf,
+          read_only=True),
+    Param('max_error', math.inf, 'Tracking-error limit |x_ref - x| (inf = none)',
+          'm or rad', 1e-12, math.inf, read_only=True),
+    Param('accel_window', 0.01, 'The measured acceleration checked against amax is the '
+          'velocity change over this window', 's', 1e-4, 1.0, read_only=True),
+    Param('exit_on_trip', False, 'After a limit trip, command 0 V for trip_hold more and '
+          'exit with status 3 (false: command 0 V until configured again or stopped)',
+          read_only=True),
+    Param('trip_hold', 0.05, 'With exit_on_trip: stamp time of 0 V commands after the trip '
+          'before the node exits (the recording shows the stop)', 's', 0.0, 60.0,
+          read_only=True),
+    DIAGNOSTICS_READERS,
 )
 
 #: how long a node waits for its expected peers before it goes on with a warning [s]
 MATCH_TIMEOUT = 10.0
+
+#: the limits' status on /diagnostics: reliable, and kept for a late reader
+LIMITS_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def gain_params(plant: PlantConfig) -> tuple[Param, ...]:
@@ -143,7 +188,8 @@ class ControllerNode(ManagedNode):
     def __init__(self) -> None:
         super().__init__('controller_node', namespace=DEFAULT_NAMESPACE)
         self.declare_params(BASE_PARAMS)
-        cfg = load_plant(self.p['plant'])
+        cfg = param_files.load_plant('plant', self.p['plant'], self.file_dirs)
+        self.limits = limits_from(self.p)   # an invalid travel is a one-line error
         self.declare_params(gain_params(cfg))   # defaults depend on the plant
         # the law knows the nominal model derived from the plant file, never the plant
         self.cfg = dataclasses.replace(derive_nominal(cfg), control_rate=self.p['control_rate'])
@@ -154,6 +200,14 @@ class ControllerNode(ManagedNode):
         self._ref_sub = self._meas_sub = self._match_timer = self._watchdog_timer = None
         self.steps = 0
         self.published = 0   # commands sent (law and watchdog zeros), over all activations
+        self.guard: Guard | None = None
+        self.trip: Trip | None = None
+        self._trip_t = 0.0
+        self._finished = False
+        self.pub_diag = None
+        ns = self.get_namespace().strip('/') or DEFAULT_NAMESPACE
+        self.status_name = f'motor_comp/{ns}: limits'
+        self.hardware_id = ns
         self.autostart()
 
     def configure(self) -> None:
@@ -163,7 +217,7 @@ class ControllerNode(ManagedNode):
                  if k.startswith(mode + '.')}
         controller = make_controller(mode, plant=self.cfg,
                                      feedforward=self.p['feedforward'], **gains)
-        comp = load_compensation(self.p)   # a bad file fails configure before anything
+        comp = load_compensation(self.p, self.file_dirs)   # a bad file fails configure
         if comp is not None:
             controller.set_compensation(comp)
             self.get_logger().info(comp.summary())
@@ -196,6 +250,20 @@ class ControllerNode(ManagedNode):
         self.ignored = 0
         self.steps = 0
         self._out = Float64()
+        # the limits: a new guard (configure clears a trip); none without a limit
+        u = self.cfg.model.units
+        self.guard = (Guard(self.limits, units=(u.position, u.velocity, u.acceleration),
+                            accel_window=self.p['accel_window'])
+                      if self.limits.active else None)
+        self.trip = None
+        self.exit_status, self.exit_reason = 0, ''
+        self._armed_sent = False
+        self._t0_ns: int | None = None
+        if self.guard is not None and self.pub_diag is None:
+            self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics',
+                                                  LIMITS_QOS)
+        if self.guard is not None:
+            self.get_logger().info(f'limits: {self.limits.describe(*self.guard.units)}')
         self.pub = self.create_publisher(Float64, TOPIC_VOLTAGE, LOOP_QOS)
         # lockstep: never outrun a lagging reader (the recorder) by the writer's history;
         # acknowledgements are per writer, so pacing joint_states alone does not bound
@@ -253,6 +321,9 @@ class ControllerNode(ManagedNode):
         if readers < self.p['expected_subscribers']:
             missing.append(f'{self.p["expected_subscribers"]} voltage readers (have '
                            f'{readers})')
+        if self.pub_diag is not None and \
+                self.pub_diag.get_subscription_count() < self.p['diagnostics_readers']:
+            missing.append(f'{self.p["diagnostics_readers"]} /diagnostics readers')
         if missing:
             if time.monotonic() - self._since < MATCH_TIMEOUT:
                 return
@@ -319,6 +390,9 @@ class ControllerNode(ManagedNode):
         t_ns = fields[0]
         self._meas = (t_ns, vals[0], vals[1])
         self._meas_since = self._last_meas_rx
+        if self.trip is not None:
+            self._tripped_step(t_ns)   # 0 V at once, whatever the reference
+            return
         if self.timing is Timing.REALTIME:
             self._realtime_step(t_ns)
             return
@@ -396,13 +470,75 @@ class ControllerNode(ManagedNode):
         self.latency_hist[min(max(age, 0), DELAY_BINS)] += 1
 
     def _command(self, ref: tuple[float, float, float], dt: float | None = None) -> None:
-        _, y, vy = self._meas
-        self._out.data = self.controller.step(ref[0], ref[1], ref[2], y, vy,
-                                              self.dt if dt is None else dt)
+        t_ns, y, vy = self._meas
+        u = self.controller.step(ref[0], ref[1], ref[2], y, vy,
+                                 self.dt if dt is None else dt)
+        guard = self.guard
+        if guard is not None:
+            if not self._armed_sent:
+                self._armed_sent = True
+                self._publish_status(t_ns, None)
+            if self._t0_ns is None:
+                # lockstep stamps are sim time (from 0); realtime ones are wall-clock
+                # based: a trip's time is then counted from the first sample answered
+                self._t0_ns = 0 if self.timing is Timing.LOCKSTEP else t_ns
+            if guard.check((t_ns - self._t0_ns) * 1e-9, ref[0], ref[1], ref[2], y, vy,
+                           u) is not None:
+                u = self._on_trip(guard.trip, t_ns)
+        self._out.data = u
         self._pub_out.publish(self._out)
         self.published += 1
         self._meas = None if self.timing is Timing.LOCKSTEP else self._meas
         self.steps += 1
+
+    # -- limits ----------------------------------------------------------------------
+    def _on_trip(self, trip: Trip, t_ns: int) -> float:
+        """Latch a trip, say so (log, /diagnostics); return the command to send: 0 V."""
+        self.trip = trip
+        self._trip_t = t_ns * 1e-9   # stamp time: trip_hold counts on the samples' clock
+        self.exit_status, self.exit_reason = TRIP_EXIT_STATUS, trip.message
+        self.get_logger().error(f'TRIP {trip.message}: commanding 0 V from command '
+                                f'{self.steps} on (latched until configured again)')
+        self._publish_status(t_ns, trip)
+        return 0.0
+
+    def _tripped_step(self, t_ns: int) -> None:
+        """After a trip: answer every new measurement with 0 V; exit after the hold."""
+        if self.timing is Timing.REALTIME:
+            last = self._last_meas_ns
+            if last is not None and t_ns <= last:
+                return   # not a new sample: the plant holds the last command (0 V)
+            self._last_meas_ns = t_ns
+        self._refs.clear()   # never used again: the trajectory may keep publishing
+        self._out.data = 0.0
+        self._pub_out.publish(self._out)
+        self.published += 1
+        self.steps += 1
+        self._meas = None if self.timing is Timing.LOCKSTEP else self._meas
+        if self.p['exit_on_trip'] and t_ns * 1e-9 - self._trip_t >= self.p['trip_hold']:
+            self._finished = True
+
+    def _publish_status(self, t_ns: int, trip: Trip | None) -> None:
+        """Publish the limits' ``DiagnosticStatus``: OK (armed) or ERROR (the trip)."""
+        st = DiagnosticStatus(name=self.status_name, hardware_id=self.hardware_id)
+        if trip is None:
+            st.level = DiagnosticStatus.OK
+            st.message = f'limits armed: {self.limits.describe(*self.guard.units)}'
+            values = {'limits': st.message[len('limits armed: '):]}
+        else:
+            st.level = DiagnosticStatus.ERROR
+            st.message = trip.message
+            values = {k: (f'{v:.9g}' if isinstance(v, float) else str(v))
+                      for k, v in trip.as_dict().items() if k != 'message'}
+        st.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+        arr = DiagnosticArray(status=[st])
+        set_stamp(arr.header.stamp, t_ns)   # the sample's time (sim time in lockstep)
+        self.pub_diag.publish(arr)
+
+    @property
+    def done(self) -> bool:
+        """True once a trip's ``trip_hold`` has passed with ``exit_on_trip``."""
+        return self._finished
 
     def _zero(self, why: str) -> None:
         self._out.data = 0.0
@@ -460,7 +596,7 @@ class ControllerNode(ManagedNode):
                 raise ParameterError(f'feedforward {ff.label!r} needs a presliding (GMS) '
                                      f'effect in the nominal plant {self.cfg.source}')
         comp_changed = bool({'compensation_model', 'compensation_table'} & changed.keys())
-        comp = load_compensation(new) if comp_changed else ctl.compensation
+        comp = load_compensation(new, self.file_dirs) if comp_changed else ctl.compensation
         if comp is not None and comp.has_friction and new['feedforward'] != 'none':
             raise ParameterError(f'{comp.source} compensates friction; with feedforward '
                                  f'{new["feedforward"]!r} it would be counted twice: set '
@@ -489,21 +625,24 @@ class ControllerNode(ManagedNode):
                                    f'feedforward from command {self.steps}')
 
 
-def load_compensation(new: Mapping[str, Any]) -> Any:
+def load_compensation(new: Mapping[str, Any], dirs: Sequence[Path]) -> Any:
     """Load the compensation the parameters name (None if both are empty); one-line errors.
 
     ``compensation_model`` and ``compensation_table`` are exclusive; setting one while
     the other is set is refused, so the user clears one first (no silent precedence).
+    The file is read under :mod:`motor_comp.param_files` (inside ``dirs``, regular,
+    bounded; a reason never quotes it) and parsed from that text.
     """
-    from motor_comp.control import compensation
     model, table = new.get('compensation_model', ''), new.get('compensation_table', '')
     if model.strip() and table.strip():
         raise ParameterError('compensation_model and compensation_table are exclusive: '
                              'clear one first (set it to an empty string)')
     if model.strip():
-        return compensation.load_model(model)
+        real, axis_model = param_files.load_model('compensation_model', model, dirs)
+        return compensation.from_model(axis_model, source=str(real))
     if table.strip():
-        return compensation.load_table(table)
+        real, tab = param_files.load_table('compensation_table', table, dirs)
+        return compensation.from_table(tab, source=str(real))
     return None
 
 

@@ -17,15 +17,23 @@ diagnostic aggregator, Foxglove) with one ``DiagnosticStatus``:
   explain the residual (``changed`` or ``missing``), the share it ``explains`` and its
   fitted ``change``.
 
-Every parameter is live: a new ``model`` is loaded and validated (a bad file is
-rejected with the reason and the old model stays); thresholds must keep
-``0 < warn_nrmse < error_nrmse``.  Level changes are logged.
+The array's header is stamped with ``window_end_s`` (the newest measurement's stamp:
+sim time in lockstep), so a recording logs each verdict beside the samples it judged.
+
+Every parameter but ``timing`` and ``model_dir`` is live: a new ``model`` is loaded and
+validated (a bad file is rejected with the reason and the old model stays); thresholds
+must keep ``0 < warn_nrmse < error_nrmse``.  Level changes are logged.  The model file
+is read under :mod:`motor_comp.param_files`: only inside ``model_dir``, only a regular
+file under a size bound, and a rejection reason (returned to the caller and logged, so
+on ``/rosout``) never quotes the file.
 """
 from __future__ import annotations
 
 import collections
 import json
-from typing import Any, Mapping
+import time
+from pathlib import Path
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -33,9 +41,11 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
+from motor_comp import param_files
 from motor_comp.errors import ParameterError
-from motor_comp.nodes.common import DEFAULT_NAMESPACE, RECORD_QOS, TOPIC_JOINT_STATES, \
-    TOPIC_VOLTAGE, Param, ParamNode, run_node, stamp_to_ns
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, DIAGNOSTICS_READERS, MODEL_DIR, \
+    RECORD_QOS, TOPIC_JOINT_STATES, TOPIC_VOLTAGE, Param, ParamNode, run_node, set_stamp, \
+    stamp_to_ns
 from motor_comp.physics.axis import AxisModel
 from motor_comp.workbench.monitor import Health, Level, check_thresholds, window_health
 
@@ -48,7 +58,12 @@ PARAMS = (
     Param('timing', 'lockstep', 'How commands pair with measurements: lockstep (the k-th '
           'command answers the k-th measurement) or realtime (the newest one)',
           choices=('lockstep', 'realtime'), read_only=True),
+    MODEL_DIR,
+    DIAGNOSTICS_READERS,
 )
+
+#: how long the monitor waits for its /diagnostics readers before joining anyway [s]
+MATCH_TIMEOUT = 10.0
 
 #: /diagnostics: the ROS convention (reliable, volatile, shallow)
 DIAG_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -57,11 +72,11 @@ _LEVEL_BYTES = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN
                 Level.ERROR: DiagnosticStatus.ERROR, Level.STALE: DiagnosticStatus.STALE}
 
 
-def load_model(path: str) -> AxisModel:
-    """Load the watched model; an empty path is an error naming the parameter."""
+def load_model(path: str, dirs: Sequence[Path]) -> AxisModel:
+    """Load the watched model from inside ``dirs``; an empty path names the parameter."""
     if not path.strip():
         raise ParameterError('model: a model file (YAML) is required')
-    return AxisModel.load(path)
+    return param_files.load_model('model', path, dirs)[1]
 
 
 def diagnostic_status(health: Health, *, name: str, hardware_id: str, window: float,
@@ -92,7 +107,7 @@ class MonitorNode(ParamNode):
         super().__init__('monitor_node', namespace=DEFAULT_NAMESPACE)
         self.declare_params(PARAMS)
         check_thresholds(self.p['warn_nrmse'], self.p['error_nrmse'])
-        self.model = load_model(self.p['model'])
+        self.model = load_model(self.p['model'], self.file_dirs)
         self._samples: collections.deque = collections.deque()
         # lockstep: measurements waiting for their command and commands that overtook
         # their measurement (two writers: arrival order across topics is not defined)
@@ -121,6 +136,7 @@ class MonitorNode(ParamNode):
         self._volt_sub = self.mark_hot(self.create_subscription(
             Float64, TOPIC_VOLTAGE, self._on_command, RECORD_QOS))
         self._js_sub = None
+        self._since = time.monotonic()
         self._match_timer = self.create_timer(0.05, self._subscribe_joint_states)
         self.get_logger().info(f'watching {self.p["model"]} over {self.p["window"]:g} s '
                                f'(WARN from NRMSE {self.p["warn_nrmse"]:g}, ERROR from '
@@ -129,6 +145,15 @@ class MonitorNode(ParamNode):
     def _subscribe_joint_states(self) -> None:
         if self._volt_sub.get_publisher_count() < 1:
             return
+        # our verdicts' readers (the recorder) too: the plant starts when it sees our
+        # joint_states reader, and a volatile reader misses what came before its match
+        need = self.p['diagnostics_readers']
+        if self.pub.get_subscription_count() < need:
+            if time.monotonic() - self._since < MATCH_TIMEOUT:
+                return
+            self.get_logger().warning(f'{self.pub.get_subscription_count()} of {need} '
+                                      f'/diagnostics readers after {MATCH_TIMEOUT:g} s: '
+                                      'joining the loop anyway')
         self.destroy_timer(self._match_timer)
         self._match_timer = None
         self._js_sub = self.mark_hot(self.create_subscription(
@@ -192,7 +217,7 @@ class MonitorNode(ParamNode):
         health = window_health(data[:, 0], data[:, 1], data[:, 2], self.model,
                                warn=self.p['warn_nrmse'], error=self.p['error_nrmse'])
         arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
+        set_stamp(arr.header.stamp, int(round(data[-1, 0] * 1e9)))   # the window's end
         arr.status = [diagnostic_status(health, name=self.status_name,
                                         hardware_id=self.hardware_id,
                                         window=self.p['window'], window_end=data[-1, 0],
@@ -210,7 +235,7 @@ class MonitorNode(ParamNode):
         """Validate thresholds and a new model file before anything changes."""
         check_thresholds(new['warn_nrmse'], new['error_nrmse'])
         if 'model' in changed:
-            model = load_model(new['model'])   # a bad file raises: the old model stays
+            model = load_model(new['model'], self.file_dirs)   # bad: the old one stays
             self.model = model
             self.get_logger().info(f'now watching {new["model"]}')
 

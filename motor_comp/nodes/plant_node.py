@@ -32,6 +32,9 @@ command, exactly as a drive does.
 
 A non-finite command never reaches the physics: it is refused with a warning and the
 step is taken at 0 V, so the loop goes on.
+
+A ``plant`` YAML file is read under :mod:`motor_comp.param_files` (inside the read-only
+``model_dir``, a regular file under a size bound, reasons that never quote it).
 """
 from __future__ import annotations
 
@@ -46,14 +49,14 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
+from motor_comp import param_files
 from motor_comp.errors import ParameterError
 from motor_comp.nodes.common import DEFAULT_NAMESPACE, DELAY_BIN_NS, DELAY_BINS, JOINT_NAME, \
-    LOOP_QOS, REALTIME_PRIORITY, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, TOPIC_VOLTAGE, \
-    ManagedNode, Pacer, Param, Timing, format_delays, period_ns, read_float64, run_node, \
-    set_realtime_priority, set_stamp
+    LOOP_QOS, MODEL_DIR, REALTIME_PRIORITY, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, \
+    TOPIC_VOLTAGE, ManagedNode, Pacer, Param, Timing, format_delays, period_ns, \
+    read_float64, run_node, set_realtime_priority, set_stamp
 from motor_comp.physics import kernel as K
 from motor_comp.physics.axis import AxisModel
-from motor_comp.physics.config import load_plant
 from motor_comp.physics.plant import Plant, StepLoad, pack_params
 
 PARAMS = (
@@ -88,6 +91,7 @@ PARAMS = (
     Param('start_delay', 0.3, 'Lockstep: settle time after all peers matched', 's', 0.0,
           60.0, read_only=True),
     REALTIME_PRIORITY,
+    MODEL_DIR,
 )
 
 
@@ -118,7 +122,7 @@ class PlantNode(ManagedNode):
     def configure(self) -> None:
         """Build the plant from the parameters, its publishers; step 0, nothing sent yet."""
         p = self.p
-        cfg = load_plant(p['plant'])
+        cfg = param_files.load_plant('plant', p['plant'], self.file_dirs)
         physics = p['physics_rate'] or cfg.physics_rate
         self._model0 = cfg.model
         try:

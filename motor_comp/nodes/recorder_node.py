@@ -3,7 +3,16 @@
 Subscribes with ``raw=True`` and hands the serialized CDR bytes unchanged to
 :class:`motor_comp.logs.McapRecorder` — no decode/encode round trip, so the file holds
 exactly what was on the wire.  Topics: ``<ns>/reference``, ``<ns>/joint_states``,
-``<ns>/voltage`` and ``/clock`` (lockstep).
+``<ns>/voltage``, ``/clock`` (lockstep) and, when anything publishes it,
+``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``: the monitor's verdicts, the
+controller's limits; its channel is created with its first message, so a run without
+diagnostics records exactly the loop's topics; ``record_diagnostics``).
+
+Output rule (issue 24): ``output`` (read-only) must name a *new* file in an existing
+directory.  It is created exclusively — an existing file or a symbolic link at the path
+is refused — so the parameter cannot clobber anything; later segments
+(``<stem>.<n>.mcap``) follow the same rule.  ``motor-comp run -o RUN.mcap`` lets the
+recorder write a new file next to ``RUN.mcap`` and moves it there at the end.
 
 Log times.  Stamped messages (JointState, Clock) are logged at their header stamp, so a
 lockstep run is logged in sim time and the same run twice gives the same data.
@@ -51,7 +60,8 @@ lockstep plant paces itself on its readers' acknowledgements
 run; ``discard`` is the control (same subscriptions and callbacks, no file).
 
 Lifecycle: see :class:`RecorderNode` (file opened on configure, written while active,
-finalised on deactivate, cleanup, shutdown or SIGINT/SIGTERM).
+finalised on deactivate, cleanup, shutdown or SIGINT/SIGTERM; every configure or
+re-activation after a finished file opens the next segment).
 
 Shutdown: on SIGINT/SIGTERM the node keeps taking messages until the graph has been
 quiet for ``drain_time``, then closes the file (summary and index written), so no
@@ -69,6 +79,7 @@ import tracemalloc
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
+from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import ParameterEvent
 from rclpy.parameter import parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
@@ -79,16 +90,19 @@ from std_msgs.msg import Float64
 from motor_comp.errors import InputFileError, MotorCompError
 from motor_comp.logs import McapRecorder
 from motor_comp.logs.mcap_io import METADATA_NAME
-from motor_comp.nodes.common import DEFAULT_NAMESPACE, EVENTS_QOS, LeanLoop, ManagedNode, \
-    Param, RECORD_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, Timing, \
-    rss_mib, run_node
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, EVENTS_QOS, MODEL_DIR, LeanLoop, \
+    ManagedNode, Param, RECORD_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, TOPIC_REFERENCE, \
+    TOPIC_VOLTAGE, Timing, rss_mib, run_node
 
 PARAMS = (
-    Param('output', 'run.mcap', 'MCAP file to write (parent directory must exist)',
+    Param('output', 'run.mcap', 'MCAP file to create: a new file in an existing directory '
+          '(an existing file or link at the path is refused, never overwritten)',
           read_only=True),
     Param('timing', 'lockstep', 'Timing mode (how voltages are time-stamped)',
           choices=('lockstep', 'realtime'), read_only=True),
     Param('record_clock', True, 'Also record /clock', read_only=True),
+    Param('record_diagnostics', True, 'Also record /diagnostics (the channel is created with '
+          'its first message)', read_only=True),
     Param('chunk_size', 262144, 'MCAP chunk size: the most a SIGKILL can lose', 'bytes',
           1024, 64 * 1024 * 1024, read_only=True),
     Param('drain_time', 0.3, 'On shutdown, stop after the topics were quiet this long', 's',
@@ -107,13 +121,19 @@ PARAMS = (
     Param('nodes', 'plant_node,trajectory_node,controller_node',
           'Comma-separated node names (same namespace) whose parameters are stored as '
           'MCAP metadata', read_only=True),
+    MODEL_DIR,
 )
+
+#: the optional topic recorded when present
+TOPIC_DIAGNOSTICS = '/diagnostics'
+
 
 _STAMP = struct.Struct('<iI')   # header.stamp (sec, nanosec) right after the CDR header
 
 
 def scenario_metadata(plant: Mapping[str, Any], controller: Mapping[str, Any],
-                      trajectory: Mapping[str, Any], *, timing: str) -> dict[str, str]:
+                      trajectory: Mapping[str, Any], *, timing: str,
+                      dirs: Any = None) -> dict[str, str]:
     """Describe the run like ``motor-comp simulate -o`` does, from the nodes' parameters.
 
     Parameters
@@ -123,14 +143,17 @@ def scenario_metadata(plant: Mapping[str, Any], controller: Mapping[str, Any],
         ``trajectory_node`` (as their parameter services return them).
     timing : str
         ``lockstep`` or ``realtime`` (a lockstep run is the simulator's run exactly).
+    dirs : sequence of Path, optional
+        Where a plant file the plant node names may be read (its physics rate); the
+        default directories of :mod:`motor_comp.param_files` when None.
 
     Returns
     -------
     dict of str to str
         The ``motor_comp`` metadata record.
     """
+    from motor_comp import param_files
     from motor_comp.control.trajectories import make_trajectory
-    from motor_comp.physics.config import load_plant
 
     mode = str(controller['mode'])
     kind = str(trajectory['trajectory'])
@@ -139,7 +162,9 @@ def scenario_metadata(plant: Mapping[str, Any], controller: Mapping[str, Any],
                                     if k.startswith(kind + '.')})
     gains = {k.split('.', 1)[1]: float(v) for k, v in controller.items()
              if k.startswith(mode + '.')}
-    cfg = load_plant(str(plant['plant']))
+    # another node's parameter names this file: read under the same rules as our own
+    cfg = param_files.load_plant('plant', str(plant['plant']),
+                                 param_files.default_dirs() if dirs is None else dirs)
     meta = {'plant': str(plant['plant']), 'controller': mode,
             'feedforward': str(controller['feedforward']), 'seed': str(int(plant['seed'])),
             'trajectory': json.dumps(traj.params()),
@@ -205,8 +230,10 @@ class RecorderNode(ManagedNode):
         self.path = Path(self.p['output'])
         self.writer: McapRecorder | None = None
         self._segment = 0
+        self._opened = False
         self._closed = True
         self._subs: dict[str, Any] = {}
+        self._optional_subs: dict[str, Any] = {}
         self._js_sub = self._match_timer = self._param_timer = None
         self._param_clients: dict[str, AsyncParameterClient] = {}
         self.counts = collections.Counter()
@@ -217,7 +244,10 @@ class RecorderNode(ManagedNode):
         if self.timing is Timing.REALTIME or not self.p['record_clock']:
             del self.topics['clock']   # no /clock in realtime
         self._types = {'reference': JointState, 'joint_states': JointState,
-                       'voltage': Float64, 'clock': Clock}
+                       'voltage': Float64, 'clock': Clock, 'diagnostics': DiagnosticArray}
+        # recorded when present: not waited for, its channel made at its first message
+        self.optional = ({'diagnostics': TOPIC_DIAGNOSTICS} if self.p['record_diagnostics']
+                         else {})
         self.create_subscription(ParameterEvent, '/parameter_events', self._on_event,
                                  EVENTS_QOS)
         self._mem_base = None
@@ -240,13 +270,20 @@ class RecorderNode(ManagedNode):
         self._open()
 
     def _open(self) -> None:
+        if self._opened:   # this node wrote the current segment: the next one, never it
+            self._segment += 1
         out = self._segment_path()
         if not out.parent.is_dir():
             raise InputFileError(f'output: directory {out.parent} does not exist')
         self.path = out
-        self.writer = (McapRecorder(out, chunk_size=self.p['chunk_size'])
-                       if not self.p['discard'] else _NullWriter())
+        try:
+            self.writer = (McapRecorder(out, chunk_size=self.p['chunk_size'], exclusive=True)
+                           if not self.p['discard'] else _NullWriter())
+        except InputFileError as exc:
+            raise InputFileError(f'output: {exc}') from None
+        self._opened = True
         self._closed = False
+        self._optional_channels: set[str] = set()
         for key, topic in self.topics.items():
             self.writer.add_channel(topic, _type_name(self._types[key]))
         self.counts = collections.Counter()
@@ -274,15 +311,18 @@ class RecorderNode(ManagedNode):
     def activate(self) -> None:
         """Subscribe the topics (``joint_states`` last) and write what arrives."""
         if self._closed:   # deactivated before: a new segment, never the finished file
-            self._segment += 1
             self._open()
         handlers = {'reference': self._on_stamped('reference'),
                     'joint_states': self._on_joint_states, 'voltage': self._on_voltage,
-                    'clock': self._on_stamped('clock')}
+                    'clock': self._on_stamped('clock'),
+                    'diagnostics': self._on_stamped('diagnostics')}
         for key, topic in self.topics.items():
             if key != 'joint_states':
                 self._subs[key] = self.mark_hot(self.create_subscription(
                     self._types[key], topic, handlers[key], RECORD_QOS, raw=True))
+        for key, topic in self.optional.items():   # not waited for (see _subscribe_…)
+            self._optional_subs[key] = self.mark_hot(self.create_subscription(
+                self._types[key], topic, handlers[key], RECORD_QOS, raw=True))
         # joint_states last: the plant starts when it sees this reader, and by then the
         # other topics' writers have matched us, so nothing of the run is missed
         self._js_args = (self._types['joint_states'], self.topics['joint_states'],
@@ -294,20 +334,19 @@ class RecorderNode(ManagedNode):
         """Stop subscribing, write what is still arriving, close the file (finalised)."""
         if self._subs or self._js_sub is not None:
             self._drain(LeanLoop(self).spin_once)
-        for sub in [*self._subs.values(), self._js_sub]:
+        for sub in [*self._subs.values(), *self._optional_subs.values(), self._js_sub]:
             self.destroy_hot(sub)
         if self._match_timer is not None:
             self.destroy_timer(self._match_timer)
-        self._subs, self._js_sub, self._match_timer = {}, None, None
+        self._subs, self._optional_subs, self._js_sub, self._match_timer = {}, {}, None, None
         self._close()
 
     def cleanup(self) -> None:
-        """Close the file if it is still open; the next configure starts at ``output``."""
+        """Close the file if it is still open; the next configure opens the next segment."""
         self.deactivate()
         if self._param_timer is not None:
             self.destroy_timer(self._param_timer)
             self._param_timer = None
-        self._segment = 0
 
     def _params_pending(self) -> list[str]:
         """Nodes that are up but whose parameters are not recorded yet.
@@ -353,7 +392,13 @@ class RecorderNode(ManagedNode):
 
     # -- messages --------------------------------------------------------------------
     def _write(self, key: str, data: bytes, t_ns: int) -> None:
-        self.writer.write_cdr(self.topics[key], data, t_ns, t_ns)
+        topic = self.topics.get(key)
+        if topic is None:   # an optional topic: its channel from its first message on
+            topic = self.optional[key]
+            if key not in self._optional_channels:
+                self.writer.add_channel(topic, _type_name(self._types[key]))
+                self._optional_channels.add(key)
+        self.writer.write_cdr(topic, data, t_ns, t_ns)
         self.counts[key] += 1
         self._last_ns = max(self._last_ns, t_ns)
         self._last_rx = time.monotonic()
@@ -434,7 +479,7 @@ class RecorderNode(ManagedNode):
         self._scenario_done = True
         try:
             meta = scenario_metadata(*(self._raw_params[n] for n in need),
-                                     timing=self.timing.value)
+                                     timing=self.timing.value, dirs=self.file_dirs)
         except (KeyError, ValueError, TypeError, MotorCompError) as exc:
             # e.g. nodes of another version: the record is optional, the run is not
             self.get_logger().warning(f'run description not stored: {exc}')
@@ -498,9 +543,10 @@ class RecorderNode(ManagedNode):
             self._write('voltage', self._pending_voltage.popleft(), self._last_ns)
         if self._changes:
             self.writer.add_metadata('parameter_changes', dict(self._changes))
+        topics = {**self.topics, **self.optional}
         self.writer.add_metadata('run', {
             'timing': self.timing.value, 'recorder': 'motor_comp recorder_node',
-            **{f'count:{self.topics[k]}': str(v) for k, v in self.counts.items()}})
+            **{f'count:{topics[k]}': str(v) for k, v in self.counts.items()}})
         self.writer.close()
         self._closed = True
         if self.p['trace_memory']:

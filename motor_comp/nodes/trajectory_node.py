@@ -34,6 +34,13 @@ reader misses reference 0, whatever the order in which DDS discovery completes.
 Parameters: ``trajectory`` (``sine | p2p | cv | chirp``) and ``<kind>.<field>`` for
 every field of each trajectory class; changes are validated by building the new
 trajectory (rejected with the reason if invalid) and take effect at the next tick.
+
+Limits (issue 24): ``travel`` [min, max], ``vmax`` and ``amax`` (read-only, the same
+parameters as the controller's; infinite = none).  A trajectory whose reference leaves
+them anywhere on the control grid over ``duration`` (600 s when 0) is refused before it
+is published (:func:`motor_comp.control.limits.check_reference`): at start a one-line
+error and exit status 2, at run time a rejected parameter update (the old trajectory
+goes on) — rather than a trip of the controller mid-run.
 """
 from __future__ import annotations
 
@@ -45,11 +52,12 @@ from typing import Any, Mapping
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
+from motor_comp.control.limits import check_reference
 from motor_comp.control.trajectories import TRAJECTORIES, Trajectory, make_trajectory
-from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, \
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, MOTION_LIMITS, \
     REALTIME_PRIORITY, Pacer, Param, ParamNode, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, \
-    TOPIC_REFERENCE, Timing, period_ns, read_clock_ns, read_joint_state, run_node, \
-    set_realtime_priority, set_stamp
+    TOPIC_REFERENCE, Timing, limits_from, period_ns, read_clock_ns, read_joint_state, \
+    run_node, set_realtime_priority, set_stamp
 
 #: SI units of the trajectory fields, for the parameter descriptions
 _UNITS = {'amplitude': 'm', 'period': 's', 'offset': 'm', 'distance': 'm', 'move_time': 's',
@@ -94,7 +102,7 @@ PARAMS = (
           'this long after each batch (0 = wake for every tick); keep it well below '
           'lookahead control periods of wall time', 's', 0.0, 0.05, read_only=True),
     REALTIME_PRIORITY,
-) + _trajectory_params()
+) + MOTION_LIMITS + _trajectory_params()
 
 #: how long the node waits for its expected readers before it goes on with a warning [s]
 MATCH_TIMEOUT = 10.0
@@ -107,7 +115,9 @@ class TrajectoryNode(ParamNode):
         super().__init__('trajectory_node', namespace=DEFAULT_NAMESPACE)
         self.declare_params(PARAMS)
         self.timing = Timing(self.p['timing'])
+        self.limits = limits_from(self.p)
         self.trajectory = self._build(self.p)
+        self._check(self.trajectory)   # refused before anything is published
         self.trajectory.at(0.0)   # load the compiled evaluator before the first tick
         self.dt_ns = period_ns(self.p['control_rate'])
         self._next_k = -1
@@ -170,9 +180,16 @@ class TrajectoryNode(ParamNode):
         params = {k[len(prefix):]: v for k, v in values.items() if k.startswith(prefix)}
         return make_trajectory(kind, **params)
 
+    def _check(self, trajectory: Trajectory) -> None:
+        """Refuse a reference beyond the limits (ParameterError naming where)."""
+        check_reference(trajectory, self.limits, duration=self.p['duration'],
+                        rate=self.p['control_rate'])
+
     def apply_params(self, changed: Mapping[str, Any], new: Mapping[str, Any]) -> None:
         """Rebuild the trajectory (raises ParameterError with the reason if invalid)."""
-        self.trajectory = self._build(new)
+        trajectory = self._build(new)
+        self._check(trajectory)   # beyond the limits: rejected, the old one goes on
+        self.trajectory = trajectory
 
     def publish_at(self, t: float, stamp_ns: int) -> None:
         """Publish the reference at trajectory time ``t`` [s] stamped ``stamp_ns``."""

@@ -32,7 +32,12 @@ from motor_comp.physics.effects import EFFECTS, VOCABULARY, AxisKind, Effect, Ef
     make_effect
 from motor_comp.physics.effects.presliding import upgrade_legacy_params
 
-__all__ = ['AxisKind', 'AxisModel', 'InputKind', 'Units', 'effects_from', 'warn_legacy']
+__all__ = ['MODEL_FIELDS', 'AxisKind', 'AxisModel', 'InputKind', 'Units', 'effects_from',
+           'warn_legacy']
+
+
+#: top-level fields of a model file (DESIGN.md §6)
+MODEL_FIELDS = ('axis', 'input', 'input_gain', 'back_emf', 'damping', 'mass', 'effects')
 
 
 class InputKind(enum.Enum):
@@ -288,7 +293,7 @@ class AxisModel:
         """Build from a model-file mapping; errors name ``source`` and the field."""
         if not isinstance(data, Mapping):
             raise ModelFileError(f'{source}: expected a mapping at top level')
-        known = {'axis', 'input', 'input_gain', 'back_emf', 'damping', 'mass', 'effects'}
+        known = set(MODEL_FIELDS)
         unknown = sorted(set(data) - known)
         if unknown:
             raise ModelFileError(f'{source}: unknown field {unknown[0]!r} '
@@ -323,18 +328,32 @@ class AxisModel:
         path = Path(path)
         try:
             with path.open('r', encoding='utf-8') as fh:
-                data = yaml.safe_load(fh)
+                text = fh.read()
         except FileNotFoundError:
             raise ModelFileError(f'{path}: no such model file') from None
         except IsADirectoryError:
             raise ModelFileError(f'{path}: is a directory, expected a model YAML file') \
                 from None
-        except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        except UnicodeDecodeError as exc:
+            raise ModelFileError(f'{path}: not valid YAML ({exc})') from None
+        return cls.from_text(text, source=str(path))
+
+    @classmethod
+    def from_text(cls, text: str, *, source: str = 'model') -> 'AxisModel':
+        """Build from the text of a model YAML file (already read); errors name ``source``.
+
+        The entry point for text read under rules of its own (a node reads a file a
+        parameter names with :mod:`motor_comp.param_files`, then parses it here: the
+        path is never opened twice).
+        """
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
             line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            raise ModelFileError(f'{path}: not valid YAML ({line})') from None
+            raise ModelFileError(f'{source}: not valid YAML ({line})') from exc
         if data is None:
-            raise ModelFileError(f'{path}: empty model file')
-        return cls.from_dict(data, source=str(path))
+            raise ModelFileError(f'{source}: empty model file')
+        return cls.from_dict(data, source=source)
 
     def save(self, path: str | Path) -> None:
         """Write the model YAML file."""

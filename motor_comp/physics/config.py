@@ -146,22 +146,44 @@ def load_plant(name_or_path: str | Path) -> PlantConfig:
     """Load ``'pmlm'``, ``'ballscrew'`` (the packaged defaults) or a plant YAML path."""
     name = str(name_or_path)
     if name in {k.value for k in PlantKind}:
-        text = resources.files('motor_comp').joinpath('config', f'{name}.yaml').read_text(
-            encoding='utf-8')
-        source = f'config/{name}.yaml'
-    else:
-        path = Path(name)
-        try:
-            text = path.read_text(encoding='utf-8')
-        except FileNotFoundError:
-            raise InputFileError(f'{path}: no such plant file (or use pmlm / ballscrew)') \
-                from None
-        except (IsADirectoryError, UnicodeDecodeError) as exc:
-            raise InputFileError(f'{path}: cannot read plant file ({exc})') from None
-        source = str(path)
+        return packaged_plant(name)
+    path = Path(name)
+    try:
+        text = path.read_text(encoding='utf-8')
+    except FileNotFoundError:
+        raise InputFileError(f'{path}: no such plant file (or use pmlm / ballscrew)') \
+            from None
+    except (IsADirectoryError, UnicodeDecodeError) as exc:
+        raise InputFileError(f'{path}: cannot read plant file ({exc})') from None
+    return plant_from_text(text, source=str(path))
+
+
+def packaged_plant(name: str) -> PlantConfig:
+    """Return the packaged plant ``pmlm`` or ``ballscrew`` (``config/<name>.yaml``)."""
+    text = resources.files('motor_comp').joinpath('config', f'{name}.yaml').read_text(
+        encoding='utf-8')
+    return plant_from_text(text, source=f'config/{name}.yaml')
+
+
+def plant_from_text(text: str, *, source: str = 'plant') -> PlantConfig:
+    """Build a :class:`PlantConfig` from the text of a plant YAML file (already read).
+
+    The entry point for text read under rules of its own (a node reads the file its
+    ``plant`` parameter names with :mod:`motor_comp.param_files`); errors name ``source``.
+    """
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise ModelFileError(f'{source}: not valid YAML ({str(exc).splitlines()[0]})') \
-            from None
+            from exc
     return plant_from_dict(data, source=source)
+
+
+def plant_names() -> tuple[str, ...]:
+    """Return the field names a plant file may hold (its schema's vocabulary)."""
+    import inspect
+    motor = set()
+    for build in (pmlm_model, ballscrew_model):
+        motor.update(inspect.signature(build).parameters)
+    return tuple(sorted(set(_PLANT_KEYS) | motor | {k for keys in _SECTION_KEYS.values()
+                                                    for k in keys}))

@@ -182,3 +182,17 @@ def test_autostart_failure_is_one_line(tmp_path: Path, ros_env) -> None:
                          capture_output=True, text=True, timeout=60, env=ros_env)
     assert res.returncode == 2 and 'Traceback' not in res.stderr, res.stderr
     assert 'autostart' in res.stderr
+    # the output rule: an existing file, or a link at the path, is never written
+    kept = tmp_path / 'kept.mcap'
+    kept.write_bytes(b'an earlier recording')
+    link = tmp_path / 'link.mcap'
+    link.symlink_to(kept)
+    for out in (kept, link):
+        res = subprocess.run([sys.executable, '-m', 'motor_comp.nodes.recorder_node',
+                              '--ros-args', '-p', f'output:={out}'],
+                             capture_output=True, text=True, timeout=60, env=ros_env)
+        err = [ln for ln in res.stderr.splitlines() if 'error:' in ln]
+        assert res.returncode == 2 and len(err) == 1, res.stderr
+        assert f'{out}: exists; refused' in err[0], err
+        assert kept.read_bytes() == b'an earlier recording'
+    assert link.is_symlink()

@@ -46,10 +46,11 @@ def test_monitor_live_friction_change_and_compensation_updates(tmp_path, nodes, 
         '/axis/plant_node': {'duration': 0.0, 'expected_subscribers': 3,
                              'expected_clock_subscribers': 1},
         # voltage readers: plant, monitor, probe; reference readers: the controller
-        '/axis/controller_node': {'expected_subscribers': 3},
+        # (the files the test names are in tmp_path: the nodes may read only there)
+        '/axis/controller_node': {'expected_subscribers': 3, 'model_dir': str(tmp_path)},
         '/axis/trajectory_node': {'expected_subscribers': 1},
         '/axis/monitor_node': {'model': str(model), 'window': WINDOW,
-                               'update_period': UPDATE},
+                               'update_period': UPDATE, 'model_dir': str(tmp_path)},
     }
     override_file = tmp_path / 'override.yaml'
     override_file.write_text(yaml.safe_dump(
@@ -82,7 +83,7 @@ def test_monitor_live_friction_change_and_compensation_updates(tmp_path, nodes, 
     assert not res[0].successful
     assert 'bad.yaml' in res[0].reason and 'coulomb.fc' in res[0].reason, res[0].reason
     res = probe.set_parameters('controller_node', compensation_model=str(tmp_path / 'no.yaml'))
-    assert not res[0].successful and 'no such model file' in res[0].reason
+    assert not res[0].successful and 'no.yaml: no such file' in res[0].reason
     assert probe.get_parameter('controller_node', 'compensation_model') == ''
     n0 = len(probe.voltages)
     probe.spin_until(lambda: len(probe.voltages) >= n0 + 300, 30, 'commands after reject')
@@ -190,6 +191,7 @@ def test_monitor_bad_start_parameters(tmp_path, nodes, params, needle):
     from motor_comp.physics.config import load_plant
     if params.get('model') == 'MODEL':
         params['model'] = str(tmp_path / 'm.yaml')
+        params['model_dir'] = str(tmp_path)
         load_plant('pmlm').model.save(params['model'])
     f = tmp_path / 'p.yaml'
     f.write_text(yaml.safe_dump({'/axis/monitor_node': {'ros__parameters': params}}))
