@@ -61,6 +61,9 @@ class Case:
     without : tuple of str
         Effects drawn and then left out of the plant: the same axis, parameters and
         noise as the case without ``without`` (a matched control run).
+    accel : float
+        Factor on the rig's sweep acceleration (an experiment that loads the drive
+        harder; labelled ``a×k`` when not 1).
     """
 
     names: tuple
@@ -72,6 +75,7 @@ class Case:
     changes: tuple = ()
     extra: tuple = ()
     without: tuple = ()
+    accel: float = 1.0
 
     @property
     def base_label(self) -> str:
@@ -81,8 +85,9 @@ class Case:
             what += ' & ' + '&'.join(self.extra)
         if self.changes:
             what += ' ' + ','.join(f'{k}x{f:g}' for k, f in self.changes)
+        hard = f' a×{self.accel:g}' if self.accel != 1.0 else ''
         return (f'{what} [{self.axis[:3]} {self.input[:3]} {self.rate:g}Hz '
-                f'{self.excitation} m{self.mass_factor:g}]')
+                f'{self.excitation}{hard} m{self.mass_factor:g}]')
 
     @property
     def label(self) -> str:
@@ -108,6 +113,8 @@ class Case:
         salt = zlib.crc32(self.base_label.encode()) % 100000
         rig, truth, extras = draw_scenario(self.names, self.extra, seed=100000 * seed + salt,
                                            axis=self.axis, input=self.input, rate=self.rate)
+        if self.accel != 1.0:
+            rig = dataclasses.replace(rig, accel=rig.accel * self.accel)
         if self.without:
             truth['effects'] = {n: p for n, p in truth['effects'].items()
                                 if n not in self.without}
@@ -134,10 +141,10 @@ class Case:
 
 def _c(names: str, axis: str = 'linear', input: str = 'voltage', rate: float = 1000.0,
        excitation: str = 'sweep', mass_factor: float = 2.0, changes: tuple = (),
-       extra: str = '', without: str = '') -> Case:
+       extra: str = '', without: str = '', accel: float = 1.0) -> Case:
     return Case(tuple(names.split('+')), axis, input, rate, excitation, mass_factor, changes,
                 tuple(extra.split('&')) if extra else (),
-                tuple(without.split('+')) if without else ())
+                tuple(without.split('+')) if without else (), accel)
 
 
 #: every effect alone (with what its law requires), from ``effects: {}`` and a wrong mass
@@ -235,14 +242,20 @@ OUT_OF_LIBRARY_CASES = (
 
 #: the library's two new effects from a bare start model: alone (with the Coulomb level
 #: they act on), with Coulomb and viscous friction, with ripple; linear and rotary;
-#: sweeps and chirps (load friction is told from Coulomb by the drive force, which
-#: differs from the friction force while accelerating)
+#: sweeps and chirps.  Load friction needs strokes whose deceleration the drive brakes
+#: (``F_in`` against the motion): while the drive pushes along the motion,
+#: ``|F_in| = (M·a + fc + fv·|v|)/(1 − mu)`` is the same law as a mass, Coulomb and
+#: viscous level all ``1/(1 − mu)`` larger, and only braking (``1/(1 + mu)``) tells them
+#: apart — so its sweeps accelerate 8× harder than the suite's (24 m/s², 240 rad/s²:
+#: above fc/M on every drawn axis, so slow strokes end drive-braked).
 NEW_EFFECT_CASES = (
-    _c('load_friction'),
-    _c('coulomb+viscous+load_friction', input='current', rate=500.0, mass_factor=0.6),
-    _c('coulomb+viscous+load_friction', excitation='chirp'),
-    _c('coulomb+viscous+load_friction', axis='rotary', input='current'),
-    _c('coulomb+viscous+ripple+load_friction', input='force', rate=2000.0, mass_factor=0.6),
+    _c('load_friction', accel=8.0),
+    _c('coulomb+viscous+load_friction', input='current', rate=500.0, mass_factor=0.6,
+       accel=8.0),
+    _c('coulomb+viscous+load_friction', excitation='interleaved', accel=8.0),
+    _c('coulomb+viscous+load_friction', axis='rotary', input='current', accel=8.0),
+    _c('coulomb+viscous+ripple+load_friction', input='force', rate=2000.0, mass_factor=0.6,
+       accel=8.0),
     _c('position_friction'),
     _c('coulomb+viscous+position_friction', input='current', rate=500.0, mass_factor=0.6),
     _c('coulomb+viscous+position_friction', axis='rotary', input='current'),

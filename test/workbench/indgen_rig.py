@@ -556,8 +556,9 @@ class Generated:
         applied, GMS elements included, viscous excluded) [N] and one force per planted
         out-of-library effect, by name [N] (a dry-friction one counted while sliding).
     meta : dict
-        The experiment (``excitation`` and its parameters) and, with position_friction,
-        its ``position_friction_peak`` ``[x, dfc]``.
+        The experiment (``excitation`` and its parameters), ``braking_share`` (the
+        share of moving samples where the drive force opposes the motion) and, with
+        position_friction, its ``position_friction_peak`` ``[x, dfc]``.
     """
 
     run: Run
@@ -802,6 +803,12 @@ def generate(truth: Mapping[str, Any], rig: Rig, *, excitation: str = 'sweep',
                        input_noise_force=float(rig.input_gain * input_noise),
                        input=rig.input)
     meta: dict[str, Any] = dict(info)
+    # where the drive brakes the motion (F_in against v): the samples that tell load
+    # friction from a larger mass, Coulomb and viscous level
+    v_log, f_log = signals['velocity'], signals['drive_force']
+    moving = v_log != 0.0
+    meta['braking_share'] = float(np.mean(f_log[moving] * v_log[moving] < 0.0)) \
+        if np.any(moving) else 0.0
     pf = (truth.get('effects') or {}).get('position_friction')
     if pf:
         meta['position_friction_peak'] = list(position_friction_peak(pf))

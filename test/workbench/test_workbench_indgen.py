@@ -124,6 +124,13 @@ def test_case_lists_carry_their_truth():
         assert {c.axis for c in mine} == {'linear', 'rotary'}
         assert any(c.names == (effect,) for c in mine)                    # alone
         assert any('ripple' in c.names for c in mine)
+    # load friction is identifiable only where the drive brakes: every case has such
+    # strokes on every axis drawn (the mass- and friction-scaling is broken there)
+    for case in NEW_EFFECT_CASES:
+        if 'load_friction' in case.names:
+            for seed in (1, 2, 3):
+                assert case.make(seed, duration=DURATION).meta['braking_share'] > 0.005, \
+                    (case.label, seed)
     half = len(ORDINARY_PRESLIDING_CASES) // 2
     assert all('presliding' in c.names and not c.without
                for c in ORDINARY_PRESLIDING_CASES[:half])
