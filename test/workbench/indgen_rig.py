@@ -551,10 +551,11 @@ class Generated:
     noise : NoiseTruth or None
         The noise added to the logged signals.
     signals : dict
-        True signals at the log stamps: ``velocity`` (motor) [m/s]; averaged over each
-        log interval: ``drive_force`` ``F_in`` [N], ``friction`` (the dry-friction force
-        applied, GMS elements included, viscous excluded) [N] and one force per planted
-        out-of-library effect, by name [N] (a dry-friction one counted while sliding).
+        True signals at the log stamps: ``velocity`` (motor) [m/s | rad/s]; averaged
+        over each log interval: ``drive_force`` ``F_in`` [N | N·m], ``friction`` (the
+        dry-friction force applied, GMS elements included, viscous excluded) and one
+        force per planted out-of-library effect, by name (a dry-friction one counted
+        while sliding).
     meta : dict
         The experiment (``excitation`` and its parameters), ``braking_share`` (the
         share of moving samples where the drive force opposes the motion) and, with
