@@ -63,7 +63,7 @@ class Case:
         noise as the case without ``without`` (a matched control run).
     accel : float
         Factor on the rig's sweep acceleration (an experiment that loads the drive
-        harder; labelled ``a×k`` when not 1).
+        harder; labelled ``accelK`` when not 1, e.g. ``sweep accel8``).
     """
 
     names: tuple
@@ -85,7 +85,7 @@ class Case:
             what += ' & ' + '&'.join(self.extra)
         if self.changes:
             what += ' ' + ','.join(f'{k}x{f:g}' for k, f in self.changes)
-        hard = f' a×{self.accel:g}' if self.accel != 1.0 else ''
+        hard = f' accel{self.accel:g}' if self.accel != 1.0 else ''
         return (f'{what} [{self.axis[:3]} {self.input[:3]} {self.rate:g}Hz '
                 f'{self.excitation}{hard} m{self.mass_factor:g}]')
 
