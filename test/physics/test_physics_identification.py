@@ -78,7 +78,8 @@ def test_gms_columns_in_one_pass_equal_one_element_at_a_time():
     rng = np.random.default_rng(3)
     x = np.cumsum(rng.normal(0, 2e-6, 4000)) + 1e-4 * np.sin(np.linspace(0, 30, 4000))
     dists = (2e-6, 7e-6, 3e-5)
-    many = gms_unit_columns(x, np.array([1 / d for d in dists]), 800.0, 1.4, 3e-3, 1.3, 1e-3)
+    many = gms_unit_columns(x, np.array([1 / d for d in dists]), 800.0, 1.4, 3e-3, 1.3, 1e-3,
+                            np.zeros(3))
     for j, d in enumerate(dists):
         one = gms_trajectory(x, np.ones(1), np.array([1.0 / d]), np.zeros(1), 800.0, 1.0,
                              1.4, 3e-3, 1.3, 1e-3)
@@ -127,3 +128,29 @@ def test_search_spaces_follow_the_sensor_and_the_record():
     (period,) = TERMS['ripple'].space(s, ctx)
     assert period.hi == pytest.approx(s.travel / 3)
     assert math.isfinite(period.lo) and period.lo > 0
+
+
+def test_gms_columns_times_the_levels_are_the_effects_own_law():
+    """A model's GMS, micro-damping included, through its term's columns (``compare``)."""
+    rng = np.random.default_rng(5)
+    n, dt = 5000, 1e-3
+    x = 2e-4 * np.sin(np.linspace(0, 40, n)) + np.cumsum(rng.normal(0, 1e-7, n))
+    fc = 12.0
+    gms = make_effect('presliding', {'alpha': [0.45, 0.3, 0.15, 0.1],
+                                     'k': [8e6, 3e6, 1e6, 3e5], 'C': 12000.0,
+                                     'sigma': [11200.0, 4200.0, 1400.0, 420.0]})
+    st = make_effect('stribeck', {'fs': 18.0, 'vs': 1e-3, 'delta': 1.0})
+    model = AxisModel(mass=25.0, effects=(make_effect('coulomb', {'fc': fc}), st, gms))
+    t = TERMS['presliding']
+    coef, eta = t.decode(model)
+    ctx = Context(present=frozenset(model.names), eta={'stribeck': {'vs': 1e-3, 'delta': 1.0},
+                                                       'presliding': eta})
+
+    class P:
+        xg = x
+    P.dt = dt
+    cols = t.columns(eta, ctx)
+    block = cols[0].fn(P)
+    got = block @ np.array([coef[c.label] for c in cols])
+    want = gms.force_along(x, dt, fc=fc, fs=18.0, vs=1e-3, delta=1.0)
+    assert np.max(np.abs(got - want)) < 1e-9 * np.max(np.abs(want))

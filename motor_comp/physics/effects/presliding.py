@@ -312,7 +312,7 @@ def upgrade_legacy_params(effects: Mapping[str, Any]) -> tuple[dict[str, Any], s
 
 
 @njit(cache=True)
-def gms_unit_columns(x, inv_d, C, fs, vs, delta, dt):
+def gms_unit_columns(x, inv_d, C, fs, vs, delta, dt, tdamp):
     """Force of unit-level Maxwell-slip elements along ``x`` [m], one column per element.
 
     An element of slip limit ``β·s(v)/fc`` and stiffness ``β/d`` (pre-sliding distance
@@ -321,9 +321,11 @@ def gms_unit_columns(x, inv_d, C, fs, vs, delta, dt):
     (Lampaert 2003; Chiew eq. 3–5): their sum is the Coulomb level ``fc``,
     ``α_j = β_j/fc``, ``k_j = β_j/d_j``.  ``fs`` is the break-away level per unit
     Coulomb level (``1 + (fs − fc)/fc``) and ``C`` the attraction per unit level
-    (``C/fc``).  The elements share the displacement, the Stribeck curve and the slip
-    decay of each step, so one pass of the element law :func:`gms_step` gives every
-    column (with ``σ = 0`` each element's force after the step is its column).
+    (``C/fc``).  ``tdamp`` [s] is each element's micro-damping time constant
+    ``σ_j/k_j``: the element's damping force ``σ_j·ż_j = σ_j·ΔF_j/(k_j·dt)`` is then
+    ``tdamp_j·ΔF_j/dt``, linear in the level too (Lampaert eq. 8).  The elements share
+    the displacement, the Stribeck curve and the slip decay of each step, so one pass of
+    the element law :func:`gms_step` gives every column.
     """
     n, m = x.shape[0], inv_d.shape[0]
     out = np.zeros((n, m))
@@ -331,13 +333,17 @@ def gms_unit_columns(x, inv_d, C, fs, vs, delta, dt):
     slip = np.zeros(m)
     alpha = np.ones(m)
     sigma = np.zeros(m)
+    prev = np.zeros(m)
+    flat = fs == 1.0          # no Stribeck rise: s(v) = sgn(v), no exponential per step
     for j in range(1, n):
         dx = x[j] - x[j - 1]
         v = dx / dt
-        s_v = stribeck_curve(v, 1.0, fs, vs, delta)
+        s_v = np.sign(v) if flat else stribeck_curve(v, 1.0, fs, vs, delta)
+        for e in range(m):
+            prev[e] = forces[e]           # the force before the step, for the damping
         gms_step(forces, 0, slip, 0, alpha, 0, inv_d, 0, sigma, 0, m, C, dt, dx, v, s_v)
         for e in range(m):
-            out[j, e] = forces[e]
+            out[j, e] = forces[e] + tdamp[e] * (forces[e] - prev[e]) / dt
     return out
 
 
@@ -404,7 +410,7 @@ class PreslidingTerm(Term):
     def grow(self, eta: Mapping) -> dict:
         """Return ``eta`` with a stiffer element at a third of the shortest distance."""
         d = tuple(eta['d'])
-        return dict(eta, d=(min(d) / 3.0,) + d)
+        return {k: v for k, v in dict(eta, d=(min(d) / 3.0,) + d).items() if k != 'tdamp'}
 
     def nonlinear(self, eta: Mapping) -> list:
         """Return the distances, and ``c`` when a Stribeck curve makes it matter."""
@@ -431,12 +437,17 @@ class PreslidingTerm(Term):
         c = float(eta['c'])
         ratio, vs, dl = self._shape(eta, ctx)
         inv = np.array([1.0 / d for d in dists])
+        tdamp = tuple(float(t) for t in eta.get('tdamp', ()))
+        if len(tdamp) != len(dists):      # no damping, or a structure the search changed
+            tdamp = (0.0,) * len(dists)
+        td = np.array(tdamp)
 
         def block(p: Any) -> np.ndarray:
             return gms_unit_columns(np.ascontiguousarray(p.xg), inv, c, 1.0 + ratio, vs, dl,
-                                    p.dt)
-        return [Column(f'b{j}', ('gms', d, c, ratio, vs, dl), block, lo=0.0,
-                       width=len(dists), index=j) for j, d in enumerate(dists)]
+                                    p.dt, td)
+        return [Column(f'b{j}', ('gms', d, c, ratio, vs, dl, t), block, lo=0.0,
+                       width=len(dists), index=j)
+                for j, (d, t) in enumerate(zip(dists, tdamp))]
 
     def admissible(self, values: Mapping, eta: Mapping, s: Summary) -> str | None:
         """Refuse a curve crossed within two samples at the run's acceleration."""
@@ -458,9 +469,14 @@ class PreslidingTerm(Term):
             keep = [int(np.argmax(beta))]
             beta[keep[0]] = 1e-9
         fc = sum(beta[j] for j in keep)
+        tdamp = tuple(eta.get('tdamp', ()))
+        if len(tdamp) != len(dists):
+            tdamp = (0.0,) * len(dists)
+        k = tuple(max(beta[j], 1e-12) / dists[j] for j in keep)
+        sigma = tuple(kk * float(tdamp[j]) for kk, j in zip(k, keep))
         out: list[Effect] = [Coulomb(fc=fc), Presliding(
-            alpha=tuple(beta[j] / fc for j in keep),
-            k=tuple(max(beta[j], 1e-12) / dists[j] for j in keep), C=c * max(fc, 1e-9))]
+            alpha=tuple(beta[j] / fc for j in keep), k=k, C=c * max(fc, 1e-9),
+            sigma=sigma if any(sigma) else ())]
         ratio, vs, dl = self._shape(eta, ctx)
         if 'stribeck' in ctx.present:
             out.append(Stribeck(fs=fc * (1.0 + ratio), vs=vs, delta=dl))
@@ -472,8 +488,10 @@ class PreslidingTerm(Term):
         fc = max(model.fc, 1e-6)
         ratio = (model.stribeck_curve_params()[1] - fc) / fc
         dists = tuple(a * fc / k for a, k in zip(e.alpha, e.k))
-        return ({f'b{j}': a * model.fc for j, a in enumerate(e.alpha)},
-                {'d': dists, 'c': e.C / fc, 'ratio': ratio})
+        eta = {'d': dists, 'c': e.C / fc, 'ratio': ratio}
+        if any(e.sigma):
+            eta['tdamp'] = tuple(s / k for s, k in zip(e.sigma, e.k))
+        return {f'b{j}': a * model.fc for j, a in enumerate(e.alpha)}, eta
 
     def scalars(self, eta: Mapping, ctx: Context) -> dict:
         """Report ``fc`` (Σβ), ``fs``, the stiffness Σk [N/m], ``c`` and the elements."""
