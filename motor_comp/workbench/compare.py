@@ -27,19 +27,13 @@ import math
 from typing import Any, Mapping
 
 import numpy as np
-from numba import njit
 
 from motor_comp.errors import MotorCompError
 from motor_comp.logs.run import Run
-from motor_comp.physics import kernel as K
 from motor_comp.physics.axis import AxisModel
-from motor_comp.physics.plant import Sensors, initial_state, pack_params
-from motor_comp.physics.effects.presliding import gms_update
-from motor_comp.physics.effects.stribeck import stribeck_curve
+from motor_comp.workbench.anchored import anchor, kstep
 from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.derivatives import Kinematics
-from motor_comp.workbench.motion import motor_position
-from motor_comp.workbench.processing import gms_position, point_position, point_velocity
 from motor_comp.workbench.residual import Residual, residual
 
 
@@ -150,61 +144,6 @@ class Comparison:
         }
 
 
-@njit(cache=True)
-def gms_states(x, alpha, k, sigma, C, fc, fs, vs, delta, dt):
-    """Element forces and phases of a GMS along a measured path ``x`` [m], per sample.
-
-    The element law of the effect (:func:`~motor_comp.physics.effects.presliding.
-    gms_update`) run from relaxed elements at the first sample; returns two
-    ``(n, elements)`` arrays: spring forces [N] and phases (0 sticking, ±1 slipping).
-    """
-    n, m = x.shape[0], alpha.shape[0]
-    F = np.zeros((n, m))
-    Z = np.zeros((n, m))
-    forces = np.zeros(m)
-    slip = np.zeros(m)
-    for j in range(1, n):
-        dx = x[j] - x[j - 1]
-        v = dx / dt
-        gms_update(forces, slip, alpha, k, sigma, C, dx, v,
-                   stribeck_curve(v, fc, fs, vs, delta), dt)
-        for e in range(m):
-            F[j, e] = forces[e]
-            Z[j, e] = slip[e]
-    return F, Z
-
-
-@njit(cache=True)
-def _kstep(P, S0, xm, xl, vm, u, origins, horizon, n_sub, gf, gz):
-    # every origin restarts the kernel from the measured state and runs it `horizon`
-    # control periods on the logged input; the dead-time buffer is filled with the
-    # commands held before the origin so a delayed model sees the right past, and the
-    # GMS elements hold the forces the measured path left in them
-    n = origins.shape[0]
-    out = np.empty(n)
-    nbuf = S0.shape[0] - K.S_DBUF
-    m = gf.shape[1]
-    for j in range(n):
-        k0 = origins[j]
-        S = S0.copy()
-        S[K.S_X] = xm[k0]
-        S[K.S_XL] = xl[k0]
-        S[K.S_V] = vm[k0]
-        S[K.S_STUCK] = 1.0 if vm[k0] == 0.0 else 0.0
-        for e in range(m):
-            S[K.S_GMS_F + e] = gf[k0, e]
-            S[K.S_GMS_SLIP + e] = gz[k0, e]
-        if nbuf > 0:
-            S[K.S_DHEAD] = 0.0
-            for m in range(1, nbuf + 1):
-                kk = k0 - 1 - (m - 1) // n_sub
-                S[K.S_DBUF + (1 - m) % nbuf] = u[max(kk, 0)]
-        for i in range(horizon):
-            K.plant_advance(P, S, u[k0 + i], 0.0, n_sub)
-        out[j] = S[K.S_XL]
-    return out
-
-
 def predict(kin: Kinematics, model: AxisModel, res: Any = None, *,
             horizon: float = 0.02, n_sub: int = 10, max_origins: int = 5000) -> Prediction:
     """Return the k-step-ahead position prediction (see the module docstring).
@@ -225,31 +164,7 @@ def predict(kin: Kinematics, model: AxisModel, res: Any = None, *,
         raise MotorCompError(f'{kin.name}: run too short for a {horizon:g} s prediction')
     step = max(1, (hi - lo) // max_origins)
     origins = np.arange(lo, hi, step, dtype=np.int64)
-    # the measured state: the motor side of a backlash gap reconstructed from the load
-    bl, dly = model.get('backlash'), model.get('delay')
-    xm_raw = kin.position if bl is None or bl.width <= 0 else motor_position(
-        kin, bl.width, model.without('backlash', 'delay'), kin.u,
-        tau=dly.tau if dly is not None else 0.0)
-    xm = point_position(kin, xm_raw)
-    vm = point_velocity(kin, xm_raw)
-    # explicit RK4 needs the physics step well inside the fastest mechanical time
-    # constant M/(damping terms): a light, heavily damped model gets more sub-steps
-    damp = (model.input_gain * model.back_emf + model.damping + model.fv
-            + (abs(model.get('asymmetry').dfv) if model.has('asymmetry') else 0.0))
-    n_sub = int(min(max(n_sub, np.ceil(kin.dt * damp / model.mass / 0.5)), 5000))
-    P = pack_params(model, Sensors(encoder_resolution=0.0), kin.dt / n_sub)
-    S0 = initial_state(P, 0.0)
-    gms = model.get('presliding')
-    if gms is not None:
-        fc, fs, vs, dl = model.stribeck_curve_params()
-        gf, gz = gms_states(np.ascontiguousarray(gms_position(kin, xm_raw)),
-                            np.array(gms.alpha), np.array(gms.k), np.array(gms.sigma),
-                            float(gms.C), fc, fs, vs, dl, kin.dt)
-    else:
-        gf = gz = np.zeros((n, 0))
-    pred = _kstep(P, S0, np.ascontiguousarray(xm), np.ascontiguousarray(kin.x),
-                  np.ascontiguousarray(vm), np.ascontiguousarray(kin.u, dtype=float),
-                  origins, h, n_sub, gf, gz)
+    pred = kstep(anchor(kin, model, n_sub=n_sub), origins, h)
     meas = kin.position[origins + h]
     err = meas - pred
     if not np.all(np.isfinite(err)):

@@ -71,8 +71,17 @@ class Motion:
             elif name == 'shares':
                 half = max(3, int(round(REVERSAL_HALF * kin.window)))
                 eps = max(kin.quantum(), kin.noise_std())
-                hit = reversal_shares(np.asarray(self.position, dtype=float), self._get('v'),
-                                      half, eps, spread=kin.hold is not InputHold.SAMPLE)
+                fwd, bwd, stuck = reversal_shares(
+                    np.asarray(self.position, dtype=float), self._get('v'), half, eps,
+                    spread=kin.hold is not InputHold.SAMPLE)
+                # an axis at rest (outside a fitted turn): its friction balances every
+                # other force, whatever the sign of its dither
+                rest = proc.rest_runs(proc.sliding_mask(
+                    kin, None if self._measured else self.position))
+                rest &= (stuck == 0.0) & ((fwd == 0.0) | (fwd == 1.0)) & \
+                    ((bwd == 0.0) | (bwd == 1.0))
+                fwd, bwd = np.where(rest, 0.0, fwd), np.where(rest, 0.0, bwd)
+                hit = (fwd, bwd, stuck, rest.astype(float))
             self._cache[name] = hit
         return hit
 
@@ -92,8 +101,8 @@ class Motion:
         return self._get('xg')
 
     @property
-    def shares(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Forward, backward and stuck shares of each sample (the turn model)."""
+    def shares(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Forward, backward, stuck (at a turn) and at-rest shares of each sample."""
         return self._get('shares')
 
 
@@ -113,6 +122,7 @@ class PathView:
     fwd = property(lambda self: self._m.shares[0])
     bwd = property(lambda self: self._m.shares[1])
     stuck = property(lambda self: self._m.shares[2])
+    rest = property(lambda self: self._m.shares[3])
     f_in = property(lambda self: self._f_in(self._m))
 
 
@@ -469,11 +479,19 @@ class View:
             return self._weigh(out) if weigh else out
         return self.data.cached(self.key(key + (weigh,), uses_input=uses_input), make)
 
-    def columns(self, cols: Sequence[Column]) -> list[np.ndarray]:
+    def ckey(self, col: Column, rests: bool) -> tuple:
+        """Return the cache key of a term's column in this view."""
+        if col.signal is not None:
+            return self.key(('signal', col.signal.value))
+        return self.key(col.key + (('rest',) if rests else ()), uses_input=col.uses_input)
+
+    def columns(self, cols: Sequence[Column], *, rests: bool = False) -> list[np.ndarray]:
         """Return terms' columns at the rows: smoothed, stencil-averaged, weighted.
 
-        Columns of one block (``width > 1``, one function giving several columns in one
-        pass) are computed together and each cached under its own key.
+        With ``rests`` each pointwise column is 0 where the axis is at rest (its
+        friction balances every force there, so no force law is seen).  Columns of one
+        block (``width > 1``, one function giving several columns in one pass) are
+        computed together and each cached under its own key.
         """
         out: list[np.ndarray | None] = []
         todo: dict[int, list[tuple[int, Column]]] = {}
@@ -481,7 +499,7 @@ class View:
             if col.signal is not None:
                 out.append(self.signal(col.signal))
                 continue
-            hit = self.data._cache.get(self.key(col.key, uses_input=col.uses_input))
+            hit = self.data._cache.get(self.ckey(col, rests))
             out.append(hit)
             if hit is None:
                 todo.setdefault(id(col.fn), []).append((i, col))
@@ -489,12 +507,17 @@ class View:
             paths = self.paths()
             for group in todo.values():
                 col0 = group[0][1]
-                raw = np.concatenate([proc.smooth_at(np.asarray(col0.fn(path), dtype=float),
-                                                     p.rows, p.W)
-                                      for p, path in zip(self.data.parts, paths)])
+                parts = []
+                for p, path in zip(self.data.parts, paths):
+                    a = np.asarray(col0.fn(path), dtype=float)
+                    if rests:
+                        keep = 1.0 - path.rest
+                        a = a * (keep[:, None] if a.ndim == 2 else keep)
+                    parts.append(proc.smooth_at(a, p.rows, p.W))
+                raw = np.concatenate(parts)
                 for i, col in group:
                     a = raw[:, col.index] if raw.ndim == 2 else raw
-                    out[i] = self.data.cached(self.key(col.key, uses_input=col.uses_input),
+                    out[i] = self.data.cached(self.ckey(col, rests),
                                               lambda a=a, col=col: self._finish(col, a))
         return out  # type: ignore[return-value]
 
@@ -510,13 +533,21 @@ class View:
             return np.ascontiguousarray(proc.stencil_gain(w, vdt)[:, 0])
         return self.data.cached(('stencil_gain', float(w), self.mkey), make)
 
-    def y(self) -> np.ndarray:
-        """Return the smoothed drive force at the rows (unweighted) with this view's delay."""
+    def y(self, *, rests: bool = False) -> np.ndarray:
+        """Return the smoothed drive force at the rows (unweighted) with this view's delay.
+
+        With ``rests`` the drive force of the samples at rest is left out (the friction
+        balances it there).
+        """
         m = self.data.model
         k = m.input_gain * m.back_emf + m.damping
         g = m.input_gain
-        w = self.smooth(lambda p, mo: g * p.kin.input_at(self.tau), ('u',), uses_input=True,
-                        weigh=False)
+        if rests:
+            w = self.smooth(lambda p, mo: g * (1.0 - mo.shares[3]) * p.kin.input_at(self.tau),
+                            ('u', 'moving'), uses_input=True, weigh=False)
+        else:
+            w = self.smooth(lambda p, mo: g * p.kin.input_at(self.tau), ('u',),
+                            uses_input=True, weigh=False)
         if not k:
             return w
         vl = self.data.at(width=self.width, tau=self.tau, model=self.model)\

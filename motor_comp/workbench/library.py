@@ -83,11 +83,22 @@ def sticks(spec: Spec, data: Dataset) -> bool:
             and not any(t.models_sticking for t in ts))
 
 
+def rests(spec: Spec) -> bool:
+    """Whether the samples at rest are out of the force balance (a dry friction holds them).
+
+    At rest the dry friction balances every other force, so no law is seen there; a
+    model without a dry friction level has to explain the rest (it cannot: that is
+    the evidence that it needs one).
+    """
+    return any(TERMS[n].dry_friction for n in spec.names)
+
+
 def context(spec: Spec, data: Dataset | None = None) -> Context:
     """Return the :class:`Context` the terms' columns of ``spec`` see."""
     return Context(present=frozenset(spec.names), eta=spec.eta,
                    sticks=sticks(spec, data) if data is not None else False,
-                   direction=int(data.direction) if data is not None else 0)
+                   direction=int(data.direction) if data is not None else 0,
+                   rests=rests(spec))
 
 
 def owned_columns(spec: Spec, ctx: Context) -> list[tuple[str, Column]]:
@@ -177,11 +188,10 @@ def design(data: Dataset, spec: Spec, model: AxisModel | None = None, *,
         labs.append(MASS)
         keys.append(view.key(('signal', Signal.ACCELERATION.value)))
         bound_cols.append(Column('mass', ('mass',)))
-    cols += view.columns([c for _, c in owned])
+    cols += view.columns([c for _, c in owned], rests=ctx.rests)
     for n, c in owned:
         labs.append((n, c.label))
-        keys.append(view.key(('signal', c.signal.value)) if c.signal is not None
-                    else view.key(c.key, uses_input=c.uses_input))
+        keys.append(view.ckey(c, ctx.rests))
         bound_cols.append(c)
     y, ykey = target(view, spec, ctx)
     return Design(cols, labs, keys, _bounds(labs, bound_cols, spec, ctx), y, ykey, ctx, view)
@@ -213,7 +223,7 @@ def target(view: View, spec: Spec, ctx: Context) -> tuple[np.ndarray, tuple]:
     (:func:`sticks`), minus ``M·ẍ`` when the mass is fixed; weighted like the columns.
     """
     def make() -> np.ndarray:
-        y = view.y()
+        y = view.y(rests=ctx.rests)
         if ctx.sticks:
             y = y - view.stuck_force()
         if not spec.mass_free:
@@ -222,7 +232,7 @@ def target(view: View, spec: Spec, ctx: Context) -> tuple[np.ndarray, tuple]:
         sw = view.sw
         return y if sw is None else y * sw
     key = view.key(('target', spec.mass_free, 0.0 if spec.mass_free else float(spec.mass),
-                    ctx.sticks), uses_input=True)
+                    ctx.sticks, ctx.rests), uses_input=True)
     return view.data.cached(key, make), key
 
 

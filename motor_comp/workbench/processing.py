@@ -177,23 +177,39 @@ def point_position(kin: Kinematics, x: np.ndarray) -> np.ndarray:
                        mode='mirror')
 
 
-def sliding_mask(kin: Kinematics) -> np.ndarray:
+def sliding_mask(kin: Kinematics, position: np.ndarray | None = None) -> np.ndarray:
     """Select the samples where the axis slides: |ẋ| above 5× its estimation noise.
 
     The velocity noise of the Savitzky–Golay derivative is estimated from the position
     noise (or the encoder quantum when the noise is below it) and the filter's own
     noise gain, so the threshold adapts to the sensor and the sample rate; never
     below 0.2 % of the peak speed (the sign of a near-stopped axis is arbitrary).
+    ``position`` is another position signal on the run's grid (a motor motion across
+    a gap); default the measured one.
     """
     coeff_noise = np.sqrt(np.sum(savgol_coeffs(kin.window, kin.polyorder, deriv=1) ** 2))
     sigma_x = max(kin.noise_std(), kin.quantum() / np.sqrt(12.0))
+    v = kin.v if position is None else correlate1d(
+        np.asarray(position, dtype=float), _coeffs(kin.window, kin.polyorder, 1),
+        mode='mirror') / kin.dt
     v_min = 5.0 * sigma_x * coeff_noise / kin.dt
-    v_min = max(v_min, 2e-3 * float(np.max(np.abs(kin.v))))
-    m = np.abs(kin.v) > v_min
+    v_min = max(v_min, 2e-3 * float(np.max(np.abs(v))))
+    m = np.abs(v) > v_min
     # the filter's transient at both ends of the record is not trusted
     m[:kin.window] = False
     m[-kin.window:] = False
     return m
+
+
+def rest_runs(moving: np.ndarray, min_stop: int = 3) -> np.ndarray:
+    """Return the samples of runs of at least ``min_stop`` samples not ``moving``."""
+    still = ~np.asarray(moving, dtype=bool)
+    d = np.diff(np.concatenate([[0], still.astype(np.int8), [0]]))
+    out = np.zeros(len(still), dtype=bool)
+    for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)):
+        if b - a >= min_stop:
+            out[a:b] = True
+    return out
 
 
 def fit_rows_mask(kin: Kinematics, *, min_stop: int = 3, half: int | None = None) \
@@ -231,10 +247,16 @@ class Processing:
     decimate : bool
         Keep every ``W/8``-th fitted sample (the fits and every reported figure), or
         every one (the residual figures).
+    turns : bool
+        Fit the sliding samples right up to each stop (the transitions out of and into
+        a rest, where pre-sliding acts), the rest itself carrying the drive force as
+        friction for a model without a model of sticking (the turn model's stuck
+        share); False keeps a smoother half-width away from every stop.
     """
 
     smoother_scale: float = 1.0
     decimate: bool = True
+    turns: bool = True
 
     def step(self, W: int) -> int:
         """Return the decimation step [samples] for a smoother of ``W`` samples."""
@@ -245,8 +267,11 @@ class Processing:
         return smoother_length(kin, self.smoother_scale)
 
     def rows(self, kin: Kinematics, W: int) -> np.ndarray:
-        """Return the fitted samples of ``kin``: sliding, away from stops and ends."""
-        mask = fit_rows_mask(kin, half=W // 2, min_stop=3)
+        """Return the fitted samples of ``kin``: sliding, away from the record's ends."""
+        if self.turns:
+            mask = sliding_mask(kin)
+        else:
+            mask = fit_rows_mask(kin, half=W // 2, min_stop=3)
         mask[:W // 2 + 2] = False
         mask[len(kin) - W // 2 - 2:] = False
         return mask

@@ -108,7 +108,8 @@ class Path(Protocol):
     model has one), ``x``/``v`` its pointwise (short-window) position and velocity,
     ``xg`` the position the pre-sliding elements are driven by, ``fwd``/``bwd``/
     ``stuck`` the share of each sample's acceleration kernel spent sliding forward,
-    backward and stuck at a turn (the turn model), ``f_in`` the pointwise drive force
+    backward and stuck at a turn (the turn model), ``rest`` 1 where the axis rests
+    (outside a turn; its friction balances every force there), ``f_in`` the pointwise drive force
     [N] with the model's dead time, ``dt`` the step [s] and ``direction`` as in
     :class:`Summary`.
     """
@@ -120,6 +121,7 @@ class Path(Protocol):
     fwd: np.ndarray
     bwd: np.ndarray
     stuck: np.ndarray
+    rest: np.ndarray
     f_in: np.ndarray
     dt: float
     direction: int
@@ -140,12 +142,15 @@ class Context:
         friction model without a model of sticking): their sign columns are 0 there.
     direction : int
         As :attr:`Summary.direction`.
+    rests : bool
+        The samples at rest are out of the force balance (a dry friction holds them).
     """
 
     present: frozenset
     eta: Mapping
     sticks: bool = False
     direction: int = 0
+    rests: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
