@@ -32,7 +32,7 @@ from motor_comp.errors import MotorCompError
 from motor_comp.logs.run import Run
 from motor_comp.physics.axis import AxisModel
 from motor_comp.workbench.anchored import anchor, kstep
-from motor_comp.workbench.dataset import Dataset
+from motor_comp.workbench.library import dataset_for
 from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.residual import Residual, residual
 
@@ -253,7 +253,7 @@ def replay(run: Run, model: AxisModel) -> tuple[Replay | None, str]:
 def compare(run: Run, kin: Kinematics, model: AxisModel, *, horizon: float = 0.02,
             closed_loop: bool = True) -> Comparison:
     """Compare ``model`` with the run in force and position (see module docstring)."""
-    data = Dataset([kin], model)
+    data = dataset_for([kin], model)
     res = residual(kin, model, data=data)
     pred = predict(kin, model, horizon=horizon)
     rep, note = replay(run, model) if closed_loop else (None, 'not requested')

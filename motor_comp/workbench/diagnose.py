@@ -138,7 +138,7 @@ def as_list(kin: Kinematics | Sequence[Kinematics]) -> list[Kinematics]:
 
 @single_threaded_blas()
 def diagnose(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *, folds: int = 5,
-             min_gain: float = 0.1, min_drop: float = 0.01,
+             min_gain: float = 0.1,
              candidates: Sequence[str] | None = None, rotary: bool = False) -> Diagnosis:
     """Rank what is wrong with ``model`` on one run or several (one experiment).
 
@@ -152,16 +152,13 @@ def diagnose(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *, folds:
         Number of folds the validation blocks are dealt to (>= 2).
     min_gain : float
         Least held-out fraction of the residual a supported candidate removes (0–1).
-    min_drop : float
-        Least held-out force-NRMSE decrease of a supported candidate (0.01 = 1 % of
-        the drive force).
     candidates : sequence of str, optional
         Restrict to these effect names (default: every effect the model lacks).
     rotary : bool
         Treat the position as an angle [rad] even if the model file says linear.
     """
     kins = as_list(kin)
-    eng = sel.Engine(kins, model, folds=folds, min_gain=min_gain, min_drop=min_drop,
+    eng = sel.Engine(kins, model, folds=folds, min_gain=min_gain,
                      rotary=rotary)
     model = eng.model
     h0 = eng.h0(model)
@@ -185,8 +182,8 @@ def diagnose(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *, folds:
     g = gain_note(common_scale(model, h0), model)
     if g:
         exp.insert(0, g)
-    return Diagnosis(baseline_nrmse=eng.nrmse(eng.sse_given), refit_nrmse=h0.nrmse_cv,
-                     rms_residual=math.sqrt(eng.sse_given / eng.data.n),
+    return Diagnosis(baseline_nrmse=eng.nrmse_given, refit_nrmse=h0.nrmse_cv,
+                     rms_residual=math.sqrt(eng.sse_given / eng.given_data.n),
                      n_samples=sum(len(k) for k in kins),
                      n_sliding=int(sum(np.count_nonzero(m) for m in eng.data.masks)),
                      n_eff=eng.data.n_eff,

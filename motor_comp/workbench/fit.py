@@ -109,7 +109,7 @@ def params_text(est: Estimate, name: str, units: Any) -> str:
 @single_threaded_blas()
 def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
         add: Sequence[str] = (), auto: bool = False, folds: int = 5,
-        min_gain: float = 0.1, min_drop: float = 0.01, max_steps: int = 10,
+        min_gain: float = 0.1, max_steps: int = 10,
         progress: Callable[[str], None] | None = None, rotary: bool = False) -> FitResult:
     """Refit ``model``; add ``add`` (a step each); with ``auto``, stepwise selection.
 
@@ -123,8 +123,9 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
         Effects to add, in order (``mass`` is always refit and accepted as a no-op).
     auto : bool
         Forward selection with backward elimination until nothing pays.
-    folds, min_gain, min_drop : int, float, float
-        Validation folds and the "pays for its parameters" thresholds.
+    folds, min_gain : int, float
+        Validation folds and the least held-out share of the residual a supported
+        effect removes (see :mod:`.selection`).
     max_steps : int
         Most selection changes with ``auto``.
     progress : callable, optional
@@ -141,11 +142,11 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
     say = progress or (lambda s: None)
     kins = [kin] if isinstance(kin, Kinematics) else list(kin)
     _check_add_list(model, add)
-    eng = sel.Engine(kins, model, folds=folds, min_gain=min_gain, min_drop=min_drop,
+    eng = sel.Engine(kins, model, folds=folds, min_gain=min_gain,
                      rotary=rotary)
     model = eng.model
     u = eng.units
-    steps = [FitStep(None, eng.nrmse(eng.sse_given), model, 'starting model', 'start')]
+    steps = [FitStep(None, eng.nrmse_given, model, 'starting model', 'start')]
     say(f'start: force NRMSE {100 * steps[0].force_nrmse:.1f} % (as given)')
 
     def step(effect: str, action: str, est: Estimate, text: str) -> None:
@@ -163,9 +164,10 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
     for name in add:
         if name == MASS:
             continue
-        eta = search(eng.data, est.spec.with_(name, {}), name, est.model) \
+        D = eng.data_for(est.spec.with_(name, {}))
+        eta = search(D, est.spec.with_(name, {}), name, est.model) \
             if TERMS[name].params else {}
-        est = sel.research(eng, estimate(eng.data, est.spec.with_(name, eta), est.model), name)
+        est = sel.research(eng, estimate(D, est.spec.with_(name, eta), est.model), name)
         step(name, 'add', est, '')
     if auto:
         est = sel.select(eng, est, step, say, max_steps)
@@ -210,8 +212,9 @@ def _uncertainty(eng: sel.Engine, est: Estimate, *,
     least that: the weighted fit's own SEs came out 2–3× smaller than its errors (the
     weights are estimated from the same residuals).
     """
-    spreads = (processing_spread(eng.data, est.spec, est.model),
-               measurement_spread(eng.data, est.spec, est.model))
+    D = eng.data_for(est.spec)
+    spreads = (processing_spread(D, est.spec, est.model),
+               measurement_spread(D, est.spec, est.model))
     floor = floor or {}
 
     def se_of(g: str, k: str, v: float) -> float:
@@ -223,9 +226,9 @@ def _uncertainty(eng: sel.Engine, est: Estimate, *,
            for g, d in est.se.items()}
     from motor_comp.workbench.library import context
     for n in est.spec.names:
-        for p in TERMS[n].space(eng.summary, context(est.spec, eng.data)):
+        for p in TERMS[n].space(eng.summary, context(est.spec, D)):
             if p.profile and p.name in unc.get(n, {}):
-                prof = profile_se(eng.data, est.spec, est.model, n, p.name)
+                prof = profile_se(D, est.spec, est.model, n, p.name)
                 if math.isfinite(prof):
                     unc[n][p.name] = max(unc[n][p.name], prof)
     return unc
@@ -234,7 +237,7 @@ def _uncertainty(eng: sel.Engine, est: Estimate, *,
 def refit_linear(kin: Kinematics | Sequence[Kinematics], model: AxisModel) -> AxisModel:
     """Return the model with every parameter jointly refit (no effect added/removed)."""
     kins = [kin] if isinstance(kin, Kinematics) else list(kin)
-    eng = sel.Engine(kins, model, folds=5, min_gain=0.1, min_drop=0.01)
+    eng = sel.Engine(kins, model, folds=5, min_gain=0.1)
     return eng.h0(model).model
 
 

@@ -23,6 +23,7 @@ from motor_comp.physics.effects import TERMS, VOCABULARY, EffectKind
 from motor_comp.physics.effects.identification import MASS, Column, Context, Signal, Term
 from motor_comp.workbench.dataset import Dataset, SpeedWeights, View
 from motor_comp.workbench.lsq import Bounds, solve_gram
+from motor_comp.workbench.processing import Processing
 
 #: candidate effects in vocabulary order
 ORDER = VOCABULARY
@@ -91,6 +92,22 @@ def rests(spec: Spec) -> bool:
     the evidence that it needs one).
     """
     return any(TERMS[n].dry_friction for n in spec.names)
+
+
+def reaches_stops(spec: Spec) -> bool:
+    """Whether ``spec``'s fits reach the stops (a term's evidence lies in those transitions)."""
+    from motor_comp.physics.effects.identification import Evidence
+    return any(TERMS[n].evidence & Evidence.STOPS for n in spec.names)
+
+
+def processing_for(spec: Spec, base: Processing = Processing()) -> Processing:
+    """Return the processing ``spec`` is judged with: its rows reach the stops or not."""
+    return dataclasses.replace(base, turns=reaches_stops(spec))
+
+
+def dataset_for(kins: Sequence[Any], model: AxisModel, **kw: Any) -> Dataset:
+    """Return the dataset a model is judged on (one rule for every command)."""
+    return Dataset(kins, model, processing=processing_for(spec_of(model)), **kw)
 
 
 def context(spec: Spec, data: Dataset | None = None) -> Context:
@@ -315,6 +332,7 @@ def values_of(spec: Spec, labs: Sequence[tuple], theta: np.ndarray) -> dict:
     return vals
 
 
-__all__ = ['Design', 'ORDER', 'Spec', 'context', 'design', 'encode', 'given_sse', 'labels',
-           'n_params', 'owned_columns', 'spec_of', 'sticks', 'target', 'term', 'theta_of',
-           'values_of', 'view_for']
+__all__ = ['Design', 'ORDER', 'Spec', 'context', 'dataset_for', 'design', 'encode',
+           'given_sse', 'labels', 'processing_for', 'reaches_stops',
+           'n_params', 'owned_columns', 'spec_of', 'sticks', 'target', 'term',
+           'theta_of', 'values_of', 'view_for']

@@ -33,7 +33,7 @@ from motor_comp.physics.effects import TERMS, EffectKind
 from motor_comp.physics.effects.identification import Signal
 from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.derivatives import kinematics
-from motor_comp.workbench.library import context, design, spec_of, theta_of
+from motor_comp.workbench.library import context, dataset_for, design, spec_of, theta_of
 from motor_comp.workbench.session import default_hold
 
 
@@ -211,7 +211,7 @@ def window_health(t: np.ndarray, position: np.ndarray, command: np.ndarray,
               voltage=np.asarray(command, dtype=float), name='window')
     try:
         kin = kinematics(run, window_s=smoothing_s, hold=default_hold(model))
-        data = Dataset([kin], model, folds=2)
+        data = dataset_for([kin], model, folds=2)
     except MotorCompError:
         return stale        # too short or too little motion for the processing
     n_fit = int(sum(np.count_nonzero(m) for m in data.masks))

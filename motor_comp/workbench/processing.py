@@ -249,14 +249,16 @@ class Processing:
         every one (the residual figures).
     turns : bool
         Fit the sliding samples right up to each stop (the transitions out of and into
-        a rest, where pre-sliding acts), the rest itself carrying the drive force as
-        friction for a model without a model of sticking (the turn model's stuck
-        share); False keeps a smoother half-width away from every stop.
+        a rest, where pre-sliding acts; the rest itself is out of the force balance),
+        for a model with a term whose evidence is there; False (every other model)
+        keeps a smoother half-width away from every stop: there the turn model's
+        misfit of a stick would bias the sliding terms (measured on the independent
+        suite: 97.8 % of 312 fits pass with the gap, 89.7 % without it).
     """
 
     smoother_scale: float = 1.0
     decimate: bool = True
-    turns: bool = True
+    turns: bool = False
 
     def step(self, W: int) -> int:
         """Return the decimation step [samples] for a smoother of ``W`` samples."""

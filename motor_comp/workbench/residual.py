@@ -22,7 +22,8 @@ from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects.identification import MASS, Signal
 from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.derivatives import Kinematics
-from motor_comp.workbench.library import design, given_sse, spec_of, theta_of
+from motor_comp.workbench.library import dataset_for, design, given_sse, processing_for, \
+    spec_of, theta_of
 from motor_comp.workbench.motion import motor_position, reversals
 from motor_comp.workbench.processing import Processing, sliding_mask
 
@@ -83,9 +84,9 @@ def residual(kin: Kinematics, model: AxisModel, *, data: Dataset | None = None) 
     ``data`` is the run's dataset when the caller has one (its NRMSE is then not
     computed again).
     """
-    data = data if data is not None else Dataset([kin], model)
-    full = Dataset([kin], model, processing=Processing(decimate=False))
     spec = spec_of(model)
+    data = data if data is not None else dataset_for([kin], model)
+    full = Dataset([kin], model, processing=processing_for(spec, Processing(decimate=False)))
     d = design(full, spec, model)
     th = theta_of(model, spec, d.ctx)
     n = len(kin)

@@ -6,12 +6,13 @@
 * **Candidates** are the terms a run can judge: their declared needs met (reversals,
   both directions, an axis kind), what they require present, what they exclude absent.
 * **Pays** — a candidate is supported when, on held-out folds, it removes at least
-  ``min_gain`` of the residual, lowers the force NRMSE by at least ``min_drop``, and
-  improves the held-out BIC; or, for a term with a shape parameter (a dead time, a gap,
-  a pre-sliding stiffness), when it removes most of what the model leaves, the BIC
-  improves and its shape is pinned down within the precision the term declares (its
-  force share can be small while it matters for the motion).  Its fitted values must
-  lie in the term's declared domain; bounds hold inside the estimator.
+  ``min_gain`` of the residual and improves the held-out BIC, while the model it joins
+  leaves more than its noise floor (:mod:`.floor`: what a perfect model would leave on
+  this run); its fitted values must lie in the term's declared domain, and bounds hold
+  inside the estimator.  Whether an effect matters is judged against what the
+  measurement can show, not against the drive force: a dead time of a fraction of a
+  millisecond pays on a clean run where it is most of what is left, and nothing pays on
+  a run whose residual is already at its floor.
 * **Forward** adds the supported candidate with the best held-out BIC; when none pays
   alone, two strong ones that pay together are looked for (**look-ahead**); after an
   addition the other terms' nonlinear parameters are searched again (**re-search**) and
@@ -29,8 +30,9 @@ Where today's rules came from (issue 22): a rotary spring over a revolution — 
 spring's declared need; "an asymmetry within 2 SE tried as an offset" and "a spring
 tried as an offset" — the nested replacement above (a term whose columns contain
 another's); the reweighting skipping Stribeck, GMS and backlash — their declared
-evidence at the turns; "delay, backlash and GMS pay below the threshold if their
-relative SE is under 5/5/25 %" — each term's declared shape precision; "GMS only when
+evidence at the turns; "delay, backlash and GMS pay below the 1 % force threshold if
+their relative SE is under 5/5/25 %" — the noise floor, which replaced that threshold
+for every effect; "GMS only when
 its longest distance exceeds 2·a₉₀·dt²" — the pre-sliding term's declared domain;
 bounds clipped after scoring — bounds inside the estimator (:mod:`.lsq`); Coulomb kept
 while Stribeck or GMS need it — their declared requirement; pre-sliding and backlash
@@ -47,9 +49,11 @@ import numpy as np
 from motor_comp.errors import ParameterError
 from motor_comp.physics.axis import AxisKind, AxisModel, Units
 from motor_comp.physics.effects import TERMS, EffectKind
-from motor_comp.workbench.dataset import Dataset, SpeedWeights
+from motor_comp.workbench.dataset import Dataset, SpeedWeights, model_signature
+from motor_comp.workbench.floor import Floor, noise_floor
 from motor_comp.workbench.derivatives import Kinematics
-from motor_comp.workbench.library import ORDER, Spec, given_sse, n_params, spec_of
+from motor_comp.workbench.library import ORDER, Spec, given_sse, n_params, processing_for, \
+    reaches_stops, spec_of
 from motor_comp.workbench.lsq import bic
 from motor_comp.workbench.result import Estimate, estimate
 from motor_comp.workbench.varpro import cv_candidate, cv_design, search
@@ -57,9 +61,6 @@ from motor_comp.workbench.wording import MASS, REFIT, ROTARY_UNITS, TITLES, Para
     axis_units, common_scale, directions, fmt_param, model_scalars, scale_forces, \
     significant_changes
 
-#: "most of what the model leaves": least held-out share a shaped term removes to pay
-#: below ``min_drop``
-RESOLVED_GAIN = 0.5
 #: a candidate that does not pay alone is tried in a pair when it removes at least this
 #: held-out share of the residual
 PAIR_GAIN = 0.5
@@ -175,7 +176,7 @@ class Engine:
     """Shared state of one diagnose/fit session: the data, H0 and the scoring rule."""
 
     def __init__(self, kins: Sequence[Kinematics], model: AxisModel, *, folds: int,
-                 min_gain: float, min_drop: float, rotary: bool = False) -> None:
+                 min_gain: float, rotary: bool = False) -> None:
         if folds < 2:
             raise ParameterError(f'folds must be >= 2, got {folds}')
         if not 0.0 <= min_gain < 1.0:
@@ -185,85 +186,108 @@ class Engine:
         self.kins = list(kins)
         self.model = model
         self.units = axis_units(model, rotary)
+        self.folds = folds
+        #: the fitted samples of every model but those whose evidence is at the stops
         self.data = Dataset(self.kins, model, folds=folds)
+        self._stops: Dataset | None = None
         D = self.data
         if D.n < folds * 8:
             raise ParameterError(f'{kins[0].name}: only {D.n} samples in motion, too few to '
                                  'identify anything: the axis barely moves; record motion '
                                  'over the travel at several speeds')
-        self.min_gain, self.min_drop = float(min_gain), float(min_drop)
-        self.sse_given = given_sse(D, model)
+        self.min_gain = float(min_gain)
+        self._floors: dict = {}
+        #: the given model on the rows it is judged on (the figure ``compare`` reports)
+        self.given_data = self.data_for(spec_of(model))
+        self.sse_given = given_sse(self.given_data, model)
+        self.nrmse_given = self.nrmse(self.sse_given, self.given_data)
         f = D.at().y()
         acc = D.at().signal(_acc())
         self.mass_excited = bool(model.mass * np.sqrt(np.mean(acc ** 2))
                                  > 0.01 * np.sqrt(np.mean((f - f.mean()) ** 2)))
+
+    def data_for(self, spec: Spec) -> Dataset:
+        """Return the dataset ``spec`` is judged on (its rows reach the stops or not)."""
+        if not reaches_stops(spec):
+            return self.data
+        if self._stops is None:
+            self._stops = Dataset(self.kins, self.model, folds=self.folds,
+                                  processing=processing_for(spec))
+        return self._stops
 
     @property
     def summary(self) -> Any:
         """The data's :class:`~motor_comp.physics.effects.identification.Summary`."""
         return self.data.summary
 
-    def nrmse(self, sse: float) -> float:
-        """Return the force NRMSE of a sum of squared residuals over the rows."""
-        den = self.data.den
+    def nrmse(self, sse: float, data: Dataset | None = None) -> float:
+        """Return the force NRMSE of a sum of squared residuals over ``data``'s rows."""
+        den = (data or self.data).den
         return math.sqrt(sse / den) if den > 0 else float('inf')
 
-    def pays(self, sse0: float, sse1: float, dp: int) -> tuple[bool, float, float]:
-        """Return (supported, explained, BIC change) of going from ``sse0`` to ``sse1``."""
-        explained = 1.0 - sse1 / sse0 if sse0 > 0 else 0.0
-        b = bic(self.data.n_eff, sse0, sse1, dp)
-        ok = (explained >= self.min_gain and self.nrmse(sse0) - self.nrmse(sse1)
-              >= self.min_drop and b < 0)
-        return bool(ok), float(explained), float(b)
+    def floor_sse(self, est: Estimate) -> float:
+        """Return the SSE the noise floor of ``est``'s model leaves on its rows (cached)."""
+        D = self.data_for(est.spec)
+        key = (id(D), model_signature(est.model))
+        hit = self._floors.get(key)
+        if hit is None:
+            f = noise_floor(D, est.model)
+            hit = self._floors[key] = (f.nrmse ** 2 * D.den if math.isfinite(f.nrmse)
+                                       else 0.0, f)
+        return hit[0]
 
-    def resolved(self, name: str, est: Estimate, explained: float, b: float) -> bool:
-        """Whether a term with a shape parameter pays although its force share is small.
+    def floor(self, est: Estimate) -> Floor:
+        """Return the noise floor of ``est``'s model (:func:`.floor.noise_floor`)."""
+        self.floor_sse(est)
+        return self._floors[(id(self.data_for(est.spec)), model_signature(est.model))][1]
 
-        A backlash gap or a dead time of a fraction of a millisecond matters for the
-        motion and the other parameters while its force share is tiny: it pays when it
-        removes most of what the model leaves (:data:`RESOLVED_GAIN`), the BIC improves,
-        and the parameter that sets its shape is pinned down within the relative
-        precision the term declares (``shape``).
+    def pays(self, sse0: float, sse1: float, dp: int, data: Dataset | None = None, *,
+             floor: float = 0.0) -> tuple[bool, float, float]:
+        """Return (supported, explained, BIC change) of going from ``sse0`` to ``sse1``.
+
+        ``floor`` is the SSE the noise floor leaves on the same rows: a model that
+        leaves no more than that has nothing the run can show missing.
         """
-        t = TERMS[name]
-        shape = getattr(t, 'shape', None)
-        if shape is None or not (explained >= max(RESOLVED_GAIN, self.min_gain) and b < 0):
-            return False
-        key, rel = shape
-        val = est.scalars.get(name, {}).get(key)
-        se = est.se.get(name, {}).get(key)
-        if val is None or se is None or not (np.isfinite(se) and se > 0 and val != 0):
-            return False
-        return bool(se <= rel * abs(val))
+        data = data or self.data
+        explained = 1.0 - sse1 / sse0 if sse0 > 0 else 0.0
+        b = bic(data.n_eff, sse0, sse1, dp)
+        ok = explained >= self.min_gain and b < 0 and sse0 > floor
+        return bool(ok), float(explained), float(b)
 
     def h0(self, model: AxisModel) -> Estimate:
         """Refit the model's own terms, every parameter (nonlinear ones re-searched)."""
         spec = spec_of(model)
+        D = self.data_for(spec)
         for n in spec.names:
             t = TERMS[n]
-            if t.params and not _vector(t, self.data):
-                spec = spec.with_(n, search(self.data, spec, n, model))
+            if t.params and not _vector(t, D):
+                spec = spec.with_(n, search(D, spec, n, model))
         if not self.mass_excited:
             spec = dataclasses.replace(spec, mass_free=False, mass=model.mass)
-        return estimate(self.data, spec, model)
+        return estimate(D, spec, model)
 
     def score(self, base: Estimate, name: str) -> CandidateResult:
-        """Score H0 + ``name``: all jointly refit, nonlinear parameters chosen in-fold."""
-        sse, eta = cv_candidate(self.data, base.spec, name, base.model,
-                                screen=0.5 * self.min_gain)
+        """Score H0 + ``name``: all jointly refit, nonlinear parameters chosen in-fold.
+
+        A candidate whose evidence lies at the stops is judged, with the model it joins,
+        on the rows that reach the stops.
+        """
+        D = self.data_for(base.spec.with_(name, {}))
+        sse0 = base.sse_cv if D is self.data_for(base.spec) else \
+            cv_design(D, base.spec, base.model)[0]
+        sse, eta = cv_candidate(D, base.spec, name, base.model, screen=0.5 * self.min_gain)
         spec = base.spec.with_(name, eta)
-        est = estimate(self.data, spec, base.model, cv=False)
+        est = estimate(D, spec, base.model, cv=False)
         dp = n_params(spec) - n_params(base.spec)
-        ok, explained, b = self.pays(base.sse_cv, sse, dp)
+        floor = self.floor_sse(base) * D.den / max(self.data_for(base.spec).den, 1e-300)
+        ok, explained, b = self.pays(sse0, sse, dp, D, floor=floor)
         why_not = est.inadmissible.get(name, '')
         if why_not:
             ok = False
-        elif not ok:
-            ok = self.resolved(name, est, explained, b)
         eff = est.model.get(name)
         before = {g: v for g, v in model_scalars(self.model).items() if g != name}
         return CandidateResult(
-            effect=name, explained=explained, force_nrmse=self.nrmse(sse),
+            effect=name, explained=explained, force_nrmse=self.nrmse(sse, D),
             params=eff.params() if eff is not None else {},
             uncertainty={k: float(v) for k, v in est.se.get(name, {}).items()},
             scalars=dict(est.scalars.get(name, {})), n_params=dp, bic_delta=b,
@@ -274,7 +298,9 @@ class Engine:
 
     def refit_result(self, est: Estimate) -> CandidateResult:
         """Turn the refit of the given model into a finding (``mass`` or ``refit``)."""
-        ok, explained, b = self.pays(self.sse_given, est.sse_cv, est.n_params)
+        D = self.data_for(est.spec)
+        sse_given = self.sse_given if D is self.given_data else given_sse(D, self.model)
+        ok, explained, b = self.pays(sse_given, est.sse_cv, est.n_params, D)
         changes = tuple(significant_changes(model_scalars(self.model), est))
         s = common_scale(self.model, est)
         model = est.model
@@ -286,7 +312,7 @@ class Engine:
         key = lambda c: f'{c.effect}.{c.name}' if c.effect != MASS else 'mass'  # noqa: E731
         return CandidateResult(
             effect=MASS if only_mass else REFIT, explained=explained,
-            force_nrmse=self.nrmse(est.sse_cv),
+            force_nrmse=self.nrmse(est.sse_cv, D),
             params={'mass': model.mass, 'effects': {e.name: e.params() for e in model.effects}},
             uncertainty={key(c): c.se for c in changes},
             scalars={key(c): c.fitted for c in changes}, n_params=est.n_params, bic_delta=b,
@@ -325,8 +351,11 @@ def select(eng: Engine, est: Estimate, step: Step, say: Callable[[str], None],
                 say('nothing else pays for its parameters: done')
                 break
             say(f'{best.effect} pays together with another effect (neither alone)')
-        new = estimate(eng.data, best.spec, best.model)
-        if not new.sse_cv < est.sse_cv:
+        D = eng.data_for(best.spec)
+        new = estimate(D, best.spec, best.model)
+        base_sse = est.sse_cv if D is eng.data_for(est.spec) else \
+            cv_design(D, est.spec, est.model)[0]
+        if not new.sse_cv < base_sse:
             say(f'{best.effect}: the held-out error did not fall: stopping')
             break
         est = research(eng, new, best.effect)
@@ -350,7 +379,7 @@ def pair(eng: Engine, est: Estimate, scored: Sequence[CandidateResult]) \
                     key=lambda c: c.bic_delta)[:PAIR_TOP]
     best = None
     for c in strong:
-        first = estimate(eng.data, c.spec, c.model)
+        first = estimate(eng.data_for(c.spec), c.spec, c.model)
         for n in candidates(first.spec, eng.data):
             other = next((s for s in scored if s.effect == n), None)
             if other is None or other.why_not or other.explained < eng.min_gain \
@@ -359,9 +388,14 @@ def pair(eng: Engine, est: Estimate, scored: Sequence[CandidateResult]) \
             second = eng.score(first, n)
             if not second.supported:
                 continue
-            sse = first.sse_cv * (1.0 - second.explained)
+            D = eng.data_for(second.spec)
+            sse = (first.sse_cv if D is eng.data_for(first.spec) else
+                   cv_design(D, first.spec, first.model)[0]) * (1.0 - second.explained)
+            sse0 = est.sse_cv if D is eng.data_for(est.spec) else \
+                cv_design(D, est.spec, est.model)[0]
             dp = n_params(second.spec) - n_params(est.spec)
-            ok, _, b = eng.pays(est.sse_cv, sse, dp)
+            ok, _, b = eng.pays(sse0, sse, dp, D, floor=eng.floor_sse(est) * D.den
+                                / max(eng.data_for(est.spec).den, 1e-300))
             if ok and (best is None or b < best[0]):
                 best = (b, c)
     return None if best is None else best[1]
@@ -375,14 +409,15 @@ def research(eng: Engine, est: Estimate, just: str) -> Estimate:
     does not rise, and ``just`` itself once more when any of them moved.
     """
     moved = False
+    D = eng.data_for(est.spec)
     for n in [m for m in est.spec.names if m != just] + [just]:
         t = TERMS[n]
-        if not t.params or _vector(t, eng.data) or (n == just and not moved):
+        if not t.params or _vector(t, D) or (n == just and not moved):
             continue
-        eta = search(eng.data, est.spec, n, est.model)
+        eta = search(D, est.spec, n, est.model)
         if eta == est.spec.of(n):
             continue
-        new = estimate(eng.data, est.spec.with_(n, eta), est.model)
+        new = estimate(D, est.spec.with_(n, eta), est.model)
         if new.sse_cv <= est.sse_cv:
             est, moved = new, True
     return est
@@ -445,17 +480,19 @@ def backward(eng: Engine, est: Estimate, just: str, step: Step,
             for sub in nested(est.spec, n):
                 if _extra_flat(est, n, sub):
                     trials.append((est.spec.without(n).with_(sub), sub))
+            D = eng.data_for(est.spec)
+            floor = eng.floor_sse(est)
             for spec, sub in trials:
-                sse = cv_design(eng.data, spec, est.model)[0]
+                sse = cv_design(D, spec, est.model)[0]
                 dp = n_params(est.spec) - n_params(spec)
-                ok, explained, b = eng.pays(sse, est.sse_cv, dp)
-                ok = (ok or eng.resolved(n, est, explained, b)) and n not in est.inadmissible
+                ok, explained, b = eng.pays(sse, est.sse_cv, dp, D, floor=floor)
+                ok = ok and n not in est.inadmissible
                 if not ok and (worst is None or explained < worst[1]):
                     worst = (n, explained, spec, sub)
         if worst is None:
             return est
         n, _, spec, sub = worst
-        est = estimate(eng.data, spec, est.model)
+        est = estimate(eng.data_for(spec), spec, est.model)
         removed_once.add(n)
         if sub is not None:
             step(n, 'remove', est, f'replaced {n} by {sub}: only its shared part still pays')
@@ -479,7 +516,8 @@ def reweighted(eng: Engine, est: Estimate) -> tuple[Estimate, str, list[str]] | 
     """
     from motor_comp.physics.effects.identification import Evidence
     D = eng.data
-    if any(TERMS[n].evidence & Evidence.TURNS for n in est.spec.names) \
+    protected = Evidence.SLOW | Evidence.TURNS | Evidence.STOPS
+    if any(TERMS[n].evidence & protected for n in est.spec.names) \
             or D.n < 4 * WEIGHT_BANDS:
         return None
     speed = np.abs(D.at().signal(_vel()))
@@ -595,6 +633,6 @@ def _weighted_elimination(eng: Engine, spec: Spec, model: AxisModel,
     return spec, removed
 
 
-__all__ = ['CandidateResult', 'Engine', 'PAIR_GAIN', 'RESOLVED_GAIN', 'WEIGHT_BANDS',
+__all__ = ['CandidateResult', 'Engine', 'PAIR_GAIN', 'WEIGHT_BANDS',
            'WEIGHT_CONTRAST', 'backward', 'candidates', 'cv_unweighted', 'nested', 'pair',
            'research', 'reweighted', 'select']

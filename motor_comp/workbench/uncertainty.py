@@ -145,7 +145,9 @@ def correlations(cov: np.ndarray, labels: list) -> list[tuple[str, str, float]]:
             if labels[i][0] == labels[j][0] or sd[i] == 0 or sd[j] == 0:
                 continue
             rho = float(cov[i, j] / (sd[i] * sd[j]))
-            if abs(rho) >= CORRELATED:
+            # beyond ±1 the covariance is not positive semi-definite there (a singular
+            # block): no correlation can be read from it
+            if CORRELATED <= abs(rho) <= 1.0 + 1e-9:
                 out.append((f'{labels[i][0]}.{labels[i][1]}',
                             f'{labels[j][0]}.{labels[j][1]}', rho))
     return out

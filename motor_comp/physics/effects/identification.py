@@ -38,8 +38,14 @@ class Evidence(enum.Flag):
 
     #: while the axis slides (friction levels, ripple, springs, gravity, a dead time)
     SLIDING = enum.auto()
-    #: around reversals and at rest (pre-sliding hysteresis, a backlash gap)
+    #: while it slides slowly, around the turns (the Stribeck rise): rows there must
+    #: not be weighted down
+    SLOW = enum.auto()
+    #: at reversals (a backlash gap, pre-sliding): the run needs reversals to show it
     TURNS = enum.auto()
+    #: in the transitions into and out of a rest (pre-sliding hysteresis): the fitted
+    #: rows reach the stops
+    STOPS = enum.auto()
 
 
 class Signal(enum.Enum):

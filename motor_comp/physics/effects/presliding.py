@@ -370,12 +370,13 @@ class PreslidingTerm(Term):
     so a GMS whose longest distance is shorter is crossed within a sample or two and
     fits how a stick ends between samples, not a curve.  The attraction ``C`` is free
     only when a Stribeck curve makes it matter (with a constant level a slipping
-    element sits at its limit).  Its evidence is around reversals.
+    element sits at its limit).  Its evidence is around reversals and in the transitions
+    out of a rest, where the elements are loaded again: its fits reach the stops.
     """
 
     name = 'presliding'
     effect = Presliding
-    evidence = Evidence.TURNS
+    evidence = Evidence.TURNS | Evidence.STOPS
     requires = ('coulomb',)
     replaces = ('coulomb', 'stribeck')
     excludes = ('backlash',)

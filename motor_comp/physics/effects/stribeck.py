@@ -119,7 +119,7 @@ class StribeckTerm(Term):
     effect = Stribeck
     requires = ('coulomb',)
     #: it acts while the axis slides slowly: around the turns
-    evidence = Evidence.SLIDING | Evidence.TURNS
+    evidence = Evidence.SLIDING | Evidence.SLOW
     dry_friction = True
     params = ('vs', 'delta')
     force_scaled = (('stribeck', 'fs'),)
