@@ -20,7 +20,7 @@ from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects.presliding import gms_update
 from motor_comp.physics.effects.stribeck import stribeck_curve
 from motor_comp.physics.plant import Sensors, initial_state, pack_params
-from motor_comp.workbench.derivatives import Kinematics
+from motor_comp.workbench.derivatives import InputHold, Kinematics
 from motor_comp.workbench.motion import motor_position
 from motor_comp.workbench.processing import gms_position, point_position, point_velocity
 
@@ -69,7 +69,19 @@ def _seed(S, S0, k0, xm, xl, vm, u, n_sub, gf, gz):
 
 
 @njit(cache=True)
-def _kstep(P, S0, xm, xl, vm, u, origins, horizon, n_sub, gf, gz):
+def _advance(P, S, u, k, n_sub, interp):
+    # one sample period from sample k: a held command, or a sampled input (a measured
+    # current) interpolated to each sub-step's middle
+    if not interp or k + 1 >= u.shape[0]:
+        K.plant_advance(P, S, u[k], 0.0, n_sub)
+        return
+    for s in range(n_sub):
+        w = (s + 0.5) / n_sub
+        K.plant_advance(P, S, (1.0 - w) * u[k] + w * u[k + 1], 0.0, 1)
+
+
+@njit(cache=True)
+def _kstep(P, S0, xm, xl, vm, u, origins, horizon, n_sub, gf, gz, interp):
     # every origin restarts the kernel from the measured state and runs it `horizon`
     # control periods on the logged input; returns the load position at the horizon
     n = origins.shape[0]
@@ -79,13 +91,13 @@ def _kstep(P, S0, xm, xl, vm, u, origins, horizon, n_sub, gf, gz):
         k0 = origins[j]
         _seed(S, S0, k0, xm, xl, vm, u, n_sub, gf, gz)
         for i in range(horizon):
-            K.plant_advance(P, S, u[k0 + i], 0.0, n_sub)
+            _advance(P, S, u, k0 + i, n_sub, interp)
         out[j] = S[K.S_XL]
     return out
 
 
 @njit(cache=True)
-def _windows(P, S0, xm, xl, vm, u, origins, n_sub, gf, gz):
+def _windows(P, S0, xm, xl, vm, u, origins, n_sub, gf, gz, interp):
     # the load position of the model run from each origin to the next (a run made of
     # windows anchored to the measurement)
     n = xl.shape[0]
@@ -97,7 +109,7 @@ def _windows(P, S0, xm, xl, vm, u, origins, n_sub, gf, gz):
         _seed(S, S0, k0, xm, xl, vm, u, n_sub, gf, gz)
         out[k0] = S[K.S_XL]
         for k in range(k0 + 1, k1):
-            K.plant_advance(P, S, u[k - 1], 0.0, n_sub)
+            _advance(P, S, u, k - 1, n_sub, interp)
             out[k] = S[K.S_XL]
     return out
 
@@ -115,6 +127,7 @@ class Anchor:
     n_sub: int
     gf: np.ndarray
     gz: np.ndarray
+    interp: bool
 
 
 def anchor(kin: Kinematics, model: AxisModel, *, n_sub: int = 10) -> Anchor:
@@ -139,18 +152,20 @@ def anchor(kin: Kinematics, model: AxisModel, *, n_sub: int = 10) -> Anchor:
         gf = gz = np.zeros((len(kin), 0))
     return Anchor(P, initial_state(P, 0.0), np.ascontiguousarray(point_position(kin, xm_raw)),
                   np.ascontiguousarray(kin.x), np.ascontiguousarray(point_velocity(kin, xm_raw)),
-                  np.ascontiguousarray(kin.u, dtype=float), n_sub, gf, gz)
+                  np.ascontiguousarray(kin.u, dtype=float), n_sub, gf, gz,
+                  kin.hold is InputHold.SAMPLE)
 
 
 def kstep(a: Anchor, origins: np.ndarray, horizon: int) -> np.ndarray:
     """Return the load position ``horizon`` samples after each origin [m]."""
-    return _kstep(a.P, a.S0, a.xm, a.xl, a.vm, a.u, origins, horizon, a.n_sub, a.gf, a.gz)
+    return _kstep(a.P, a.S0, a.xm, a.xl, a.vm, a.u, origins, horizon, a.n_sub, a.gf, a.gz,
+                  a.interp)
 
 
 def windows(a: Anchor, origins: np.ndarray) -> np.ndarray:
     """Return the run the model makes from each origin to the next, at every sample [m]."""
     return _windows(a.P, a.S0, a.xm, a.xl, a.vm, a.u, origins.astype(np.int64), a.n_sub,
-                    a.gf, a.gz)
+                    a.gf, a.gz, a.interp)
 
 
 __all__ = ['Anchor', 'anchor', 'gms_states', 'kstep', 'windows']

@@ -138,7 +138,7 @@ def as_list(kin: Kinematics | Sequence[Kinematics]) -> list[Kinematics]:
 
 @single_threaded_blas()
 def diagnose(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *, folds: int = 5,
-             min_gain: float = 0.1,
+             min_gain: float = 0.1, min_drop: float = 0.01,
              candidates: Sequence[str] | None = None, rotary: bool = False) -> Diagnosis:
     """Rank what is wrong with ``model`` on one run or several (one experiment).
 
@@ -152,13 +152,16 @@ def diagnose(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *, folds:
         Number of folds the validation blocks are dealt to (>= 2).
     min_gain : float
         Least held-out fraction of the residual a supported candidate removes (0–1).
+    min_drop : float
+        Least held-out force-NRMSE fall of a supported candidate (0.01 = 1 % of the
+        drive force), or the noise floor's NRMSE when that is smaller.
     candidates : sequence of str, optional
         Restrict to these effect names (default: every effect the model lacks).
     rotary : bool
         Treat the position as an angle [rad] even if the model file says linear.
     """
     kins = as_list(kin)
-    eng = sel.Engine(kins, model, folds=folds, min_gain=min_gain,
+    eng = sel.Engine(kins, model, folds=folds, min_gain=min_gain, min_drop=min_drop,
                      rotary=rotary)
     model = eng.model
     h0 = eng.h0(model)

@@ -109,7 +109,7 @@ def params_text(est: Estimate, name: str, units: Any) -> str:
 @single_threaded_blas()
 def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
         add: Sequence[str] = (), auto: bool = False, folds: int = 5,
-        min_gain: float = 0.1, max_steps: int = 10,
+        min_gain: float = 0.1, min_drop: float = 0.01, max_steps: int = 10,
         progress: Callable[[str], None] | None = None, rotary: bool = False) -> FitResult:
     """Refit ``model``; add ``add`` (a step each); with ``auto``, stepwise selection.
 
@@ -123,9 +123,10 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
         Effects to add, in order (``mass`` is always refit and accepted as a no-op).
     auto : bool
         Forward selection with backward elimination until nothing pays.
-    folds, min_gain : int, float
-        Validation folds and the least held-out share of the residual a supported
-        effect removes (see :mod:`.selection`).
+    folds, min_gain, min_drop : int, float, float
+        Validation folds, the least held-out share of the residual a supported effect
+        removes and the least NRMSE fall it brings (unless the noise floor is smaller;
+        see :mod:`.selection`).
     max_steps : int
         Most selection changes with ``auto``.
     progress : callable, optional
@@ -142,7 +143,7 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
     say = progress or (lambda s: None)
     kins = [kin] if isinstance(kin, Kinematics) else list(kin)
     _check_add_list(model, add)
-    eng = sel.Engine(kins, model, folds=folds, min_gain=min_gain,
+    eng = sel.Engine(kins, model, folds=folds, min_gain=min_gain, min_drop=min_drop,
                      rotary=rotary)
     model = eng.model
     u = eng.units

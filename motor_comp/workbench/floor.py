@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 
@@ -48,6 +49,8 @@ class Floor:
         Encoder resolution estimated from the run [m or rad].
     rows : int
         Samples the floor is measured on.
+    data : Dataset or None
+        The anchored runs measured like the run (the structure scan compares with them).
     """
 
     nrmse: float
@@ -55,6 +58,7 @@ class Floor:
     noise: float
     quantum: float
     rows: int
+    data: Any = dataclasses.field(default=None, repr=False, compare=False)
 
     def as_dict(self) -> dict:
         """Return the JSON form."""
@@ -122,7 +126,7 @@ def noise_floor(data: Dataset, model: AxisModel, *, seed: int = 0) -> Floor:
     sensor = math.sqrt(max(ms - ms0, 0.0) / per_row) if per_row > 0 else float('nan')
     kin0 = data.kins[0]
     return Floor(nrmse=nrmse, sensor_nrmse=sensor, noise=kin0.noise_std(),
-                 quantum=kin0.quantum(), rows=int(d_syn.n))
+                 quantum=kin0.quantum(), rows=int(d_syn.n), data=d_syn)
 
 
 __all__ = ['Floor', 'WINDOW_SMOOTHERS', 'noise_floor']

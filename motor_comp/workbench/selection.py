@@ -6,13 +6,12 @@
 * **Candidates** are the terms a run can judge: their declared needs met (reversals,
   both directions, an axis kind), what they require present, what they exclude absent.
 * **Pays** — a candidate is supported when, on held-out folds, it removes at least
-  ``min_gain`` of the residual and improves the held-out BIC, while the model it joins
-  leaves more than its noise floor (:mod:`.floor`: what a perfect model would leave on
-  this run); its fitted values must lie in the term's declared domain, and bounds hold
-  inside the estimator.  Whether an effect matters is judged against what the
-  measurement can show, not against the drive force: a dead time of a fraction of a
-  millisecond pays on a clean run where it is most of what is left, and nothing pays on
-  a run whose residual is already at its floor.
+  ``min_gain`` of the residual, improves the held-out BIC, and lowers the force NRMSE by
+  what matters: ``min_drop`` of the drive force, or the noise floor (:mod:`.floor`, what
+  a perfect model would leave on this run) when that is smaller — on a clean run a dead
+  time of a fraction of a millisecond is most of what is left and pays, and nothing
+  pays on a run whose residual is at its floor; its fitted values must lie in the
+  term's declared domain, and bounds hold inside the estimator.
 * **Forward** adds the supported candidate with the best held-out BIC; when none pays
   alone, two strong ones that pay together are looked for (**look-ahead**); after an
   addition the other terms' nonlinear parameters are searched again (**re-search**) and
@@ -176,7 +175,7 @@ class Engine:
     """Shared state of one diagnose/fit session: the data, H0 and the scoring rule."""
 
     def __init__(self, kins: Sequence[Kinematics], model: AxisModel, *, folds: int,
-                 min_gain: float, rotary: bool = False) -> None:
+                 min_gain: float, min_drop: float = 0.01, rotary: bool = False) -> None:
         if folds < 2:
             raise ParameterError(f'folds must be >= 2, got {folds}')
         if not 0.0 <= min_gain < 1.0:
@@ -195,7 +194,7 @@ class Engine:
             raise ParameterError(f'{kins[0].name}: only {D.n} samples in motion, too few to '
                                  'identify anything: the axis barely moves; record motion '
                                  'over the travel at several speeds')
-        self.min_gain = float(min_gain)
+        self.min_gain, self.min_drop = float(min_gain), float(min_drop)
         self._floors: dict = {}
         #: the given model on the rows it is judged on (the figure ``compare`` reports)
         self.given_data = self.data_for(spec_of(model))
@@ -246,12 +245,15 @@ class Engine:
         """Return (supported, explained, BIC change) of going from ``sse0`` to ``sse1``.
 
         ``floor`` is the SSE the noise floor leaves on the same rows: a model that
-        leaves no more than that has nothing the run can show missing.
+        leaves no more than that has nothing the run can show missing, and the NRMSE
+        must fall by ``min_drop`` or by the floor's NRMSE, the smaller.
         """
         data = data or self.data
         explained = 1.0 - sse1 / sse0 if sse0 > 0 else 0.0
         b = bic(data.n_eff, sse0, sse1, dp)
-        ok = explained >= self.min_gain and b < 0 and sse0 > floor
+        need = min(self.min_drop, self.nrmse(floor, data)) if floor > 0 else self.min_drop
+        ok = (explained >= self.min_gain and b < 0 and sse0 > floor
+              and self.nrmse(sse0, data) - self.nrmse(sse1, data) >= need)
         return bool(ok), float(explained), float(b)
 
     def h0(self, model: AxisModel) -> Estimate:

@@ -1,0 +1,409 @@
+"""What the residual still holds: a structure scan against the noise floor (DESIGN.md §6).
+
+A model that fits is not a model that is complete.  The final model's *held-out*
+residual (each fold's samples predicted by the parameters fitted on the others) is
+regressed on a smooth function of one variable at a time — position, velocity, the drive
+force (the load), time since the start, time since the last reversal — both as a force
+and as a friction (the residual times the direction of motion, which a friction flips
+with), and its time spectrum is searched for a peak (Welch).  The smooth function is a
+step function over equal-count bins, its bin count chosen by held-out share (4–32 bins);
+the share is the held-out fraction of the residual's energy it removes.
+
+The same scan is run on the residual the model leaves on its own anchored runs measured
+like this one (the noise floor's record, :mod:`.floor`): what the processing and the
+sensor alone leave — a stick resolved between samples shows against the time since a
+reversal even for a perfect model.  A structure is a **feature** when the energy it
+holds exceeds what it holds on the floor's record by a real share of the residual
+(:data:`FEATURE_SHARE`).  Each feature says where it acts, in plain words, and whether
+an effect of the library has its shape; the model is said to be complete only when its
+NRMSE is near the floor and no feature stands.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+from scipy.signal import welch
+
+from motor_comp.physics.axis import Units
+from motor_comp.workbench.dataset import Dataset
+from motor_comp.workbench.library import Spec, design, spec_of, theta_of
+from motor_comp.workbench.lsq import solve_gram
+
+#: least share of the residual's energy, beyond what the floor's record shows, that a
+#: structure must hold to be reported as a feature
+FEATURE_SHARE = 0.05
+#: a model is near its floor when its NRMSE is within this factor of it
+NEAR_FLOOR = 1.5
+#: bin counts tried for the step functions
+BINS = (4, 8, 16, 32)
+#: library effects with the shape of a structure (against, odd) → effect
+SHAPES = {('position', True): 'position_friction', ('force', True): 'load_friction',
+          ('velocity', True): 'stribeck', ('position', False): 'ripple'}
+
+
+@dataclasses.dataclass(frozen=True)
+class Feature:
+    """A structure of the residual beyond the noise floor.
+
+    Attributes
+    ----------
+    against : str
+        ``position | velocity | force | time | reversal | frequency``.
+    odd : bool
+        It flips with the direction of motion (a friction).
+    where : tuple of float
+        ``[lo, hi]`` in SI units of ``against`` (Hz for frequency; s since the last
+        reversal for reversal).
+    share : float
+        Held-out share of the residual's energy it holds beyond the floor's record.
+    amplitude : float
+        Its size [N or N·m]: the largest step of its mean.
+    text : str
+        Plain words.
+    shape_of : str
+        A library effect with this shape that the model lacks ('' when none).
+    """
+
+    against: str
+    odd: bool
+    where: tuple
+    share: float
+    amplitude: float
+    text: str
+    shape_of: str = ''
+
+    def as_dict(self) -> dict[str, Any]:
+        """Return the JSON form (DESIGN.md §6 ``features`` entry)."""
+        return {'against': self.against, 'odd': bool(self.odd),
+                'where': [float(self.where[0]), float(self.where[1])],
+                'share': float(self.share), 'amplitude': float(self.amplitude),
+                'text': self.text, 'shape_of': self.shape_of or None}
+
+
+@dataclasses.dataclass(frozen=True)
+class Unexplained:
+    """What the final model leaves: its NRMSE, the noise floor, the features."""
+
+    force_nrmse: float
+    noise_floor_nrmse: float
+    features: tuple
+    complete: bool
+    summary: str
+    scans: tuple = ()
+
+    def as_dict(self) -> dict[str, Any]:
+        """Return the JSON form of DESIGN.md §6 ``unexplained``."""
+        return {'force_nrmse': float(self.force_nrmse),
+                'noise_floor_nrmse': float(self.noise_floor_nrmse),
+                'features': [f.as_dict() for f in self.features],
+                'complete': bool(self.complete), 'summary': self.summary}
+
+
+@dataclasses.dataclass(frozen=True)
+class Profile:
+    """The step function of one scan: bin edges and means, real and floor shares."""
+
+    against: str
+    odd: bool
+    edges: np.ndarray
+    means: np.ndarray
+    share: float
+    floor_share: float
+
+
+def heldout_residual(data: Dataset, spec: Spec, model: Any) -> np.ndarray:
+    """Return the residual at the rows, each fold's rows from the others' fit [N]."""
+    d = design(data, spec, model)
+    X, y = d.X, d.y
+    P = data.part_grams(np.column_stack([X, y]))
+    out = np.empty(data.n)
+    part_of_row = np.repeat(np.arange(len(data.starts)), np.diff(np.append(data.starts, data.n)))
+    for tr, te in zip(data.train_parts, data.test_parts):
+        th, _ = solve_gram(P[tr].sum(axis=0), d.bounds)
+        rows = te[part_of_row]
+        out[rows] = y[rows] - X[rows] @ th
+    return out
+
+
+def given_residual(data: Dataset, model: Any) -> np.ndarray:
+    """Return the residual of ``model`` as given at the rows [N]."""
+    spec = spec_of(model)
+    d = design(data, spec, model)
+    return d.y - d.X @ theta_of(model, spec, d.ctx)
+
+
+def variables(data: Dataset, spec: Spec, model: Any, r: np.ndarray) -> dict[str, np.ndarray]:
+    """Return the scan variables at the rows: x, v, F, t, time since a reversal.
+
+    The load is the drive force the model explains (the measured one less the residual
+    ``r``): the measured force holds the residual itself, so any structure in time
+    would show against it.
+    """
+    from motor_comp.workbench.library import view_for
+    view = view_for(data, spec, model)
+    x = view.gather(lambda p, mo: mo.x)
+    v = view.gather(lambda p, mo: mo.v)
+    t = view.gather(lambda p, mo: p.kin.t - p.kin.t[0])
+
+    def since(p: Any, mo: Any) -> np.ndarray:
+        s = np.sign(mo.v)
+        flips = np.flatnonzero((s[1:] != s[:-1]) & (s[1:] != 0)) + 1
+        last = np.zeros(len(s))
+        idx = np.searchsorted(flips, np.arange(len(s)), side='right') - 1
+        ok = idx >= 0
+        last[ok] = (np.arange(len(s))[ok] - flips[idx[ok]]) * p.kin.dt
+        last[~ok] = np.inf
+        return last
+    rev = view.gather(since)
+    d = design(data, spec, model)
+    return {'position': x, 'velocity': v, 'force': d.y - r, 'time': t, 'reversal': rev,
+            'speed_sign': np.sign(v)}
+
+
+def _cv_share(z: np.ndarray, r: np.ndarray, fold: np.ndarray, folds: int,
+              bins: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """Held-out energy share of ``r`` a step function of ``z`` removes, and its bins."""
+    ok = np.isfinite(z)
+    zs = z[ok]
+    if len(zs) < 4 * bins:
+        return 0.0, np.zeros(0), np.zeros(0)
+    edges = np.unique(np.quantile(zs, np.linspace(0.0, 1.0, bins + 1)))
+    if len(edges) < 3:
+        return 0.0, np.zeros(0), np.zeros(0)
+    idx = np.clip(np.searchsorted(edges, z, side='right') - 1, 0, len(edges) - 2)
+    nb = len(edges) - 1
+    removed = 0.0
+    total = 0.0
+    for f in range(folds):
+        tr, te = ok & (fold != f), ok & (fold == f)
+        cnt = np.bincount(idx[tr], minlength=nb)
+        s = np.bincount(idx[tr], weights=r[tr], minlength=nb)
+        mean = np.where(cnt > 0, s / np.maximum(cnt, 1), 0.0)
+        pred = mean[idx[te]]
+        total += float(r[te] @ r[te])
+        removed += float(r[te] @ r[te] - (r[te] - pred) @ (r[te] - pred))
+    cnt = np.bincount(idx[ok], minlength=nb)
+    s = np.bincount(idx[ok], weights=r[ok], minlength=nb)
+    return (removed / total if total > 0 else 0.0), edges, np.where(cnt > 0, s / np.maximum(
+        cnt, 1), 0.0)
+
+
+def _best(z: np.ndarray, r: np.ndarray, fold: np.ndarray, folds: int) \
+        -> tuple[float, np.ndarray, np.ndarray]:
+    best = (0.0, np.zeros(0), np.zeros(0))
+    for b in BINS:
+        got = _cv_share(z, r, fold, folds, b)
+        if got[0] > best[0]:
+            best = got
+    return best
+
+
+def _scans(vars_: dict, r: np.ndarray, fold: np.ndarray, folds: int) -> dict:
+    out = {}
+    sgn = vars_['speed_sign']
+    for name in ('position', 'velocity', 'force', 'time', 'reversal'):
+        z = vars_[name]
+        for odd in (False, True):
+            if name == 'velocity':
+                zz = np.abs(z) if odd else z
+            elif name == 'force':
+                zz = np.abs(z) if odd else z
+            else:
+                zz = z
+            rr = r * sgn if odd else r
+            out[(name, odd)] = _best(zz, rr, fold, folds)
+    return out
+
+
+def _tone(data: Dataset, r: np.ndarray, t: np.ndarray) \
+        -> tuple[float, float, float, np.ndarray]:
+    """Return the residual's strongest tone: frequency [Hz], half-width [Hz], share, fit.
+
+    The peak of the Welch spectrum of the contiguous stretches of rows (gaps are stops),
+    refined to the sinusoid at that frequency that removes the most energy (least
+    squares over the rows' own times); its share is the energy it removes.
+    """
+    dt = data.kins[0].dt
+    rows = np.concatenate([p.rows + 10 ** 9 * i for i, p in enumerate(data.parts)])
+    step = int(np.median(np.diff(rows))) if len(rows) > 1 else 1
+    fs = 1.0 / (dt * step)
+    segs = []
+    start = 0
+    gaps = np.flatnonzero(np.diff(rows) != step) + 1
+    for g in list(gaps) + [len(rows)]:
+        if g - start >= 64:
+            segs.append(r[start:g])
+        start = g
+    none = (0.0, 0.0, 0.0, np.zeros_like(r))
+    if not segs:
+        return none
+    nper = int(min(256, min(len(s) for s in segs)))
+    psd = None
+    f = np.zeros(0)
+    for seg in segs:
+        f, p = welch(seg - seg.mean(), fs=fs, nperseg=nper)
+        psd = p * len(seg) if psd is None else psd + p * len(seg)
+    if psd is None or len(psd) < 4 or psd[1:].sum() <= 0:
+        return none
+    k = int(np.argmax(psd[1:])) + 1
+    df = float(f[1] - f[0])
+    e0 = float(r @ r)
+    if e0 <= 0:
+        return none
+
+    def fit_at(fr: float) -> tuple[float, np.ndarray]:
+        A = np.column_stack([np.sin(2 * np.pi * fr * t), np.cos(2 * np.pi * fr * t)])
+        th, *_ = np.linalg.lstsq(A, r, rcond=None)
+        fit = A @ th
+        return 1.0 - float((r - fit) @ (r - fit)) / e0, fit
+    # a tone keeps its phase over the run: the frequency must be resolved to a small
+    # part of 1/T, far finer than the Welch bins, so the peak is scanned at 1/(4T) and
+    # refined by a bounded search
+    span = float(np.ptp(t)) or 1.0
+    grid = np.arange(max(f[k] - df, df), f[k] + df, 0.25 / span)
+    shares = [fit_at(fr)[0] for fr in grid]
+    j = int(np.argmax(shares))
+    opt = minimize_scalar(lambda fr: -fit_at(fr)[0], bounds=(grid[max(j - 1, 0)],
+                          grid[min(j + 1, len(grid) - 1)]), method='bounded',
+                          options={'xatol': 1e-4 / span})
+    share, fit = fit_at(float(opt.x))
+    return float(opt.x), 0.5 / span, share, fit
+
+
+def _where(edges: np.ndarray, means: np.ndarray) -> tuple[float, float, float]:
+    """Return the span where a step function departs most from its typical level."""
+    if len(means) == 0:
+        return 0.0, 0.0, 0.0
+    base = float(np.median(means))
+    dev = means - base
+    k = int(np.argmax(np.abs(dev)))
+    sign = np.sign(dev[k])
+    lo = hi = k
+    while lo > 0 and sign * dev[lo - 1] > 0.5 * abs(dev[k]):
+        lo -= 1
+    while hi < len(dev) - 1 and sign * dev[hi + 1] > 0.5 * abs(dev[k]):
+        hi += 1
+    return float(edges[lo]), float(edges[hi + 1]), float(dev[k])
+
+
+def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: float,
+          units: Units, shape: str) -> str:
+    kind = 'friction' if odd else 'force'
+    way = 'higher' if amp > 0 else 'lower'
+    if against == 'position':
+        k, u = (1e3, 'mm') if not units.rotary else (1.0, 'rad')
+        span = f'over {k * lo:.4g}–{k * hi:.4g} {u} of the travel'
+    elif against == 'velocity':
+        k, u = (1e3, 'mm/s') if not units.rotary else (1.0, 'rad/s')
+        span = f'at {"speeds" if odd else "velocities"} {k * lo:.4g}–{k * hi:.4g} {u}'
+    elif against == 'force':
+        span = f'at drive forces {"|F| " if odd else ""}{lo:.4g}–{hi:.4g} {units.force}'
+    elif against == 'time':
+        span = f'from {lo:.3g} s to {hi:.3g} s of the run (it changes over time)'
+    elif against == 'reversal':
+        span = f'{1e3 * lo:.3g}–{1e3 * hi:.3g} ms after a reversal'
+    else:
+        span = f'at {lo:.3g}–{hi:.3g} Hz'
+    body = f'{kind} {way} by {abs(amp):.3g} {units.force} {span}'
+    if not odd and against != 'frequency':
+        body += ', the same sign both ways'
+    tail = (f'; the library\'s {shape} has this shape (motor-comp fit --add {shape})'
+            if shape else '; no effect in the library has this shape')
+    return f'{body} — {100 * share:.0f} % of the residual beyond the noise floor{tail}'
+
+
+def scan(data: Dataset, est: Any, floor: Any, *, units: Units) -> Unexplained:
+    """Return what ``est``'s model leaves on ``data`` (see the module docstring)."""
+    spec = est.spec
+    model = est.model
+    r = heldout_residual(data, spec, model)
+    den = data.den
+    nrmse = math.sqrt(float(r @ r) / den) if den > 0 else float('nan')
+    fnr = float(getattr(floor, 'nrmse', float('nan')))
+    vars_ = variables(data, spec, model, r)
+    real = _scans(vars_, r, data.fold, data.folds)
+    e_real = float(r @ r)
+    fdata = getattr(floor, 'data', None)
+    if fdata is not None and fdata.n > 0:
+        rf = given_residual(fdata, model)
+        fvars = variables(fdata, spec_of(model), model, rf)
+        fl = _scans(fvars, rf, fdata.fold, fdata.folds)
+        # the floor's energy per row, on this run's row count
+        e_floor_rows = float(rf @ rf) / max(fdata.n, 1) * data.n
+        f_tone = _tone(fdata, rf, fvars['time'])[2]
+    else:
+        fl, e_floor_rows, f_tone = {}, 0.0, 0.0
+    feats: list[Feature] = []
+    profiles = [Profile(k[0], k[1], e, m, sh, fl.get(k, (0.0,))[0])
+                for k, (sh, e, m) in real.items()]
+    # one structure at a time, each judged on what the ones found before leave (a
+    # structure against position shows against time and force too in a sweep)
+    cur = r.copy()
+    used: set = set()
+    tvar = vars_['time']
+    for _ in range(4):
+        best = None
+        scans = _scans(vars_, cur, data.fold, data.folds) if feats else real
+        for key, (share, edges, means) in scans.items():
+            if key[0] in used or len(means) == 0:
+                continue
+            fshare = fl.get(key, (0.0,))[0]
+            beyond = (share * float(cur @ cur) - fshare * e_floor_rows) / e_real \
+                if e_real > 0 else 0.0
+            if best is None or beyond > best[0]:
+                best = (beyond, key, edges, means)
+        if 'frequency' not in used:
+            f0, hw, tshare, tfit = _tone(data, cur, tvar)
+            beyond = (tshare * float(cur @ cur) - f_tone * e_floor_rows) / e_real \
+                if e_real > 0 else 0.0
+            if f0 > 0 and (best is None or beyond > best[0]):
+                best = (beyond, ('frequency', False), (f0, hw), tfit)
+        if best is None or best[0] < FEATURE_SHARE:
+            break
+        beyond, key, edges, means = best
+        against, odd = key
+        used.add(against)
+        if against == 'frequency':
+            f0, hw = edges
+            amp = float(np.sqrt(2.0 * np.mean(means ** 2)))
+            feats.append(Feature('frequency', False, (f0 - hw, f0 + hw), beyond, amp,
+                                 f'a disturbance of about {amp:.3g} {units.force} at '
+                                 f'{f0:.3g} Hz, not tied to position or speed — '
+                                 f'{100 * beyond:.0f} % of the residual beyond the noise '
+                                 'floor; no effect in the library has this shape'))
+            cur = cur - means
+            continue
+        lo, hi, amp = _where(edges, means)
+        shape = SHAPES.get(key, '')
+        if shape and shape in spec.names:
+            shape = ''
+        feats.append(Feature(against, odd, (lo, hi), beyond, abs(amp),
+                             _text(against, odd, lo, hi, amp, beyond, units, shape), shape))
+        z = vars_[against]
+        z = np.abs(z) if odd and against in ('velocity', 'force') else z
+        idx = np.clip(np.searchsorted(edges, z, side='right') - 1, 0, len(means) - 1)
+        step = means[idx] * (vars_['speed_sign'] if odd else 1.0)
+        cur = cur - np.where(np.isfinite(step), step, 0.0)
+    near = math.isfinite(fnr) and nrmse <= NEAR_FLOOR * fnr
+    complete = near and not feats
+    if complete:
+        summary = (f'complete as far as this run shows: force NRMSE {100 * nrmse:.2f} % at the '
+                   f'noise floor {100 * fnr:.2f} %, and no structure left in the residual')
+    elif feats:
+        summary = (f'not complete: force NRMSE {100 * nrmse:.2f} % against a noise floor of '
+                   f'{100 * fnr:.2f} %; the residual still holds: '
+                   + '; '.join(f.text for f in feats[:3]))
+    else:
+        summary = (f'force NRMSE {100 * nrmse:.2f} % against a noise floor of {100 * fnr:.2f} %: '
+                   'more is left than the measurement explains, but no structure against '
+                   'position, velocity, load, time, reversals or frequency stands out')
+    return Unexplained(force_nrmse=nrmse, noise_floor_nrmse=fnr, features=tuple(feats),
+                       complete=complete, summary=summary, scans=tuple(profiles))
+
+
+__all__ = ['FEATURE_SHARE', 'Feature', 'NEAR_FLOOR', 'Profile', 'Unexplained',
+           'given_residual', 'heldout_residual', 'scan']
