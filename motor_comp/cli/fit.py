@@ -14,6 +14,7 @@ identifiability, experiment, position: {before, after}}``.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 from motor_comp.cli.common import check_output_file, jsonable
@@ -56,8 +57,13 @@ def run(args: argparse.Namespace) -> int:
     first, last = result.steps[0], result.steps[-1]
     rotary = s.model.units.rotary
     unit, k = ('mrad', 1e3) if rotary else ('µm', 1e6)
-    lines = [f'force NRMSE: before {100 * first.force_nrmse:.1f} %, after '
-             f'{100 * last.force_nrmse:.1f} % (held-out)']
+    un = result.unexplained
+    floor = (f'; noise floor {100 * un.noise_floor_nrmse:.2f} %'
+             if un is not None and math.isfinite(un.noise_floor_nrmse) else '')
+    lines = [f'force NRMSE: before {100 * first.force_nrmse:.2f} %, after '
+             f'{100 * last.force_nrmse:.2f} % (held-out{floor})']
+    if un is not None:
+        lines.append(un.summary)
     lines += [f'cannot tell apart: {n}' for n in result.identifiability]
     lines += [f'experiment: {n}' for n in result.experiment]
     lines.append(f'position, {1e3 * before.horizon:.0f} ms-ahead prediction RMS error '

@@ -32,6 +32,7 @@ from motor_comp.errors import MotorCompError
 from motor_comp.logs.run import Run
 from motor_comp.physics.axis import AxisModel
 from motor_comp.workbench.anchored import anchor, kstep
+from motor_comp.workbench.floor import noise_floor
 from motor_comp.workbench.library import dataset_for
 from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.residual import Residual, residual
@@ -100,6 +101,7 @@ class Comparison:
     replay_note: str
     rms_residual: float = float('nan')
     rms_drive: float = float('nan')
+    noise_floor: float = float('nan')
 
     @property
     def force_fit_percent(self) -> float:
@@ -113,7 +115,8 @@ class Comparison:
         lines = [
             f'run {self.kin.name}: {len(self.kin)} samples at {1 / self.kin.dt:.0f} Hz'
             + (' (resampled from irregular stamps)' if self.kin.resampled else ''),
-            f'force: NRMSE {100 * self.force_nrmse:.1f} % (fit {self.force_fit_percent:.1f} %),'
+            f'force: NRMSE {100 * self.force_nrmse:.2f} % (fit {self.force_fit_percent:.1f} %; '
+            f'noise floor {100 * self.noise_floor:.2f} %),'
             f' RMS residual {self.rms_residual:.3g} {self.model.units.force} of RMS drive '
             f'force {self.rms_drive:.3g} {self.model.units.force}',
             f'position, {1e3 * p.horizon:.0f} ms-ahead prediction: RMS error '
@@ -136,6 +139,7 @@ class Comparison:
             'run': self.kin.name,
             'force_nrmse': float(self.force_nrmse),
             'force_fit_percent': float(self.force_fit_percent),
+            'noise_floor_nrmse': float(self.noise_floor),
             'rms_residual': float(self.rms_residual),
             'prediction': self.prediction.as_dict(),
             'replay': self.replay.as_dict() if self.replay is not None else None,
@@ -260,4 +264,5 @@ def compare(run: Run, kin: Kinematics, model: AxisModel, *, horizon: float = 0.0
     return Comparison(model=model, kin=kin, residual=res, force_nrmse=res.force_nrmse,
                       prediction=pred, replay=rep, replay_note=note,
                       rms_residual=res.force_nrmse * math.sqrt(data.den / data.n),
-                      rms_drive=math.sqrt(data.den / data.n))
+                      rms_drive=math.sqrt(data.den / data.n),
+                      noise_floor=noise_floor(data, model).nrmse)

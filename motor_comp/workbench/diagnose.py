@@ -30,6 +30,7 @@ from motor_comp.workbench import selection as sel
 from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.library import ORDER
 from motor_comp.workbench.residual import Residual, residual
+from motor_comp.workbench.scan import scan
 from motor_comp.workbench.selection import CandidateResult
 from motor_comp.workbench.wording import LINEAR_UNITS, MASS, REFIT, common_scale, \
     experiment_notes, gain_note, identifiability_notes
@@ -55,6 +56,7 @@ class Diagnosis:
     identifiability: tuple = ()
     units: Units = LINEAR_UNITS
     runs: tuple = ()
+    unexplained: Any = None
 
     @property
     def rotary(self) -> bool:
@@ -72,14 +74,23 @@ class Diagnosis:
     def summary(self) -> str:
         """Plain text for the terminal."""
         u = self.units
-        lines = [f'baseline: force NRMSE {100 * self.baseline_nrmse:.1f} % as given, '
-                 f'{100 * self.refit_nrmse:.1f} % with its own parameters refitted '
-                 f'(held-out; RMS residual {self.rms_residual:.3g} {u.force} over '
+        un = self.unexplained
+        floor = (f'; noise floor {100 * un.noise_floor_nrmse:.2f} %'
+                 if un is not None and math.isfinite(un.noise_floor_nrmse) else '')
+        lines = [f'baseline: force NRMSE {100 * self.baseline_nrmse:.2f} % as given, '
+                 f'{100 * self.refit_nrmse:.2f} % with its own parameters refitted '
+                 f'(held-out{floor}; RMS residual {self.rms_residual:.3g} {u.force} over '
                  f'{self.n_sliding} sliding samples, {self.folds} folds)']
         best = self.best
         if best is None:
-            lines.append('no candidate effect pays for its parameters: nothing is missing '
-                         'that this run can reveal')
+            if un is not None and un.features:
+                lines.append('no effect of the library pays for its parameters, but the '
+                             'residual still holds structure:')
+                lines += [f'  {f.text}' for f in un.features]
+            elif un is not None:
+                lines.append(f'no candidate effect pays for its parameters; {un.summary}')
+            else:
+                lines.append('no candidate effect pays for its parameters')
         elif best.effect in (MASS, REFIT):
             lines.append(f'first finding: {best.sentence()}')
         else:
@@ -87,6 +98,9 @@ class Diagnosis:
             if best.changes:
                 lines.append('  with, refitted jointly: '
                              + '; '.join(c.sentence(u) for c in best.changes))
+        if best is not None and un is not None and un.features:
+            lines.append('the residual of the model as refitted holds: '
+                         + '; '.join(f.text for f in un.features))
         for note in self.identifiability:
             lines.append(f'cannot tell apart: {note}')
         for note in self.experiment:
@@ -107,7 +121,11 @@ class Diagnosis:
             'axis': 'rotary' if self.rotary else 'linear',
             'units': {k: getattr(self.units, k) for k in ('position', 'velocity', 'force',
                                                           'mass', 'viscous', 'spring')},
+            'unexplained': (self.unexplained.as_dict() if self.unexplained is not None
+                            else None),
             'baseline': {'force_nrmse': float(self.baseline_nrmse),
+                         'noise_floor_nrmse': (float(self.unexplained.noise_floor_nrmse)
+                                               if self.unexplained is not None else None),
                          'refit_force_nrmse': float(self.refit_nrmse),
                          'rms_residual': float(self.rms_residual),
                          'n_samples': int(self.n_samples), 'n_sliding': int(self.n_sliding),
@@ -116,7 +134,9 @@ class Diagnosis:
             'refit': self.refit.as_dict() if self.refit is not None else None,
             'candidates': [c.as_dict() for c in self.candidates],
             'best': best.effect if best is not None else None,
-            'summary': (best.sentence() if best is not None else 'nothing missing'),
+            'summary': (best.sentence() if best is not None else
+                        (self.unexplained.summary if self.unexplained is not None
+                         else 'no candidate pays')),
             'identifiability': list(self.identifiability),
             'experiment': list(self.experiment),
         }
@@ -178,6 +198,7 @@ def diagnose(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *, folds:
     elif refit.supported:
         results.append(dataclasses.replace(refit, supported=False))
     res = residual(kins[0], model)
+    un = scan(eng.data_for(h0.spec), h0, eng.floor(h0), units=eng.units)
     best = next((c for c in results if c.supported), None)
     corr = best.correlations if best is not None else h0.correlations
     ident_notes = identifiability_notes(corr)
@@ -193,7 +214,7 @@ def diagnose(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *, folds:
                      folds=folds, candidates=tuple(results), residual=res, kin=kins[0],
                      model=model, refit=refit, experiment=tuple(exp),
                      identifiability=tuple(ident_notes), units=eng.units,
-                     runs=tuple(k.name for k in kins))
+                     runs=tuple(k.name for k in kins), unexplained=un)
 
 
 __all__ = ['CandidateResult', 'Diagnosis', 'diagnose']

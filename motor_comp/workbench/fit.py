@@ -21,6 +21,7 @@ from motor_comp.workbench import selection as sel
 from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.library import ORDER
 from motor_comp.workbench.result import Estimate, estimate
+from motor_comp.workbench.scan import scan
 from motor_comp.workbench.uncertainty import measurement_spread, processing_spread, \
     profile_se
 from motor_comp.workbench.varpro import search
@@ -60,6 +61,7 @@ class FitResult:
     experiment: tuple = ()
     at_bound: dict = dataclasses.field(default_factory=dict)
     params: dict = dataclasses.field(default_factory=dict)
+    unexplained: Any = None
 
     @property
     def se(self) -> dict:
@@ -77,7 +79,10 @@ class FitResult:
                 'params': self.params, 'uncertainty': self.uncertainty,
                 'force_nrmse': self.nrmse,
                 'identifiability': list(self.identifiability),
-                'experiment': list(self.experiment), 'at_bound': self.at_bound}
+                'experiment': list(self.experiment), 'at_bound': self.at_bound,
+                'unexplained': (self.unexplained.as_dict() if self.unexplained is not None
+                                else None),
+                'summary': self.unexplained.summary if self.unexplained is not None else ''}
 
 
 def _check_add_list(model: AxisModel, names: Sequence[str]) -> None:
@@ -197,10 +202,12 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
                              f'input_gain is {final.input_gain:.4g}, not '
                              f'{model.input_gain:.4g}', REFIT))
         say(steps[-1].summary)
+    un = scan(eng.data_for(est.spec), est, eng.floor(est), units=u)
+    say(un.summary)
     return FitResult(steps=tuple(steps), model=final, uncertainty=unc,
                      identifiability=tuple(identifiability_notes(est.correlations)),
                      experiment=tuple(exp), at_bound=dict(est.at_bound),
-                     params=model_scalars(final))
+                     params=model_scalars(final), unexplained=un)
 
 
 def _uncertainty(eng: sel.Engine, est: Estimate, *,

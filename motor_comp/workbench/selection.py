@@ -6,12 +6,15 @@
 * **Candidates** are the terms a run can judge: their declared needs met (reversals,
   both directions, an axis kind), what they require present, what they exclude absent.
 * **Pays** — a candidate is supported when, on held-out folds, it removes at least
-  ``min_gain`` of the residual, improves the held-out BIC, and lowers the force NRMSE by
-  what matters: ``min_drop`` of the drive force, or the noise floor (:mod:`.floor`, what
-  a perfect model would leave on this run) when that is smaller — on a clean run a dead
-  time of a fraction of a millisecond is most of what is left and pays, and nothing
-  pays on a run whose residual is at its floor; its fitted values must lie in the
-  term's declared domain, and bounds hold inside the estimator.
+  ``min_gain`` of the residual, improves the held-out BIC, and lowers the force NRMSE,
+  down to the noise floor (:mod:`.floor`: what a perfect model would leave on this
+  run), by what matters: ``min_drop`` of the drive force, or half the floor when that
+  is smaller.  A fall below the floor does not count: it is what the processing leaves
+  at the turns, fitted.  So on a clean run a dead time of a fraction of a millisecond
+  that is most of what is left pays, and nothing pays once the model is within
+  :data:`~.scan.NEAR_FLOOR` times its floor — where the scan calls it complete unless
+  a structure stands.  Its fitted values must lie in the term's declared domain, and
+  bounds hold inside the estimator.
 * **Forward** adds the supported candidate with the best held-out BIC; when none pays
   alone, two strong ones that pay together are looked for (**look-ahead**); after an
   addition the other terms' nonlinear parameters are searched again (**re-search**) and
@@ -50,6 +53,7 @@ from motor_comp.physics.axis import AxisKind, AxisModel, Units
 from motor_comp.physics.effects import TERMS, EffectKind
 from motor_comp.workbench.dataset import Dataset, SpeedWeights, model_signature
 from motor_comp.workbench.floor import Floor, noise_floor
+from motor_comp.workbench.scan import NEAR_FLOOR
 from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.library import ORDER, Spec, given_sse, n_params, processing_for, \
     reaches_stops, spec_of
@@ -244,16 +248,16 @@ class Engine:
              floor: float = 0.0) -> tuple[bool, float, float]:
         """Return (supported, explained, BIC change) of going from ``sse0`` to ``sse1``.
 
-        ``floor`` is the SSE the noise floor leaves on the same rows: a model that
-        leaves no more than that has nothing the run can show missing, and the NRMSE
-        must fall by ``min_drop`` or by the floor's NRMSE, the smaller.
+        ``floor`` is the SSE the noise floor leaves on the same rows (see the module
+        docstring for the rule).
         """
         data = data or self.data
         explained = 1.0 - sse1 / sse0 if sse0 > 0 else 0.0
         b = bic(data.n_eff, sse0, sse1, dp)
-        need = min(self.min_drop, self.nrmse(floor, data)) if floor > 0 else self.min_drop
-        ok = (explained >= self.min_gain and b < 0 and sse0 > floor
-              and self.nrmse(sse0, data) - self.nrmse(sse1, data) >= need)
+        f = self.nrmse(floor, data) if floor > 0 else 0.0
+        need = min(self.min_drop, (NEAR_FLOOR - 1.0) * f) if f > 0 else self.min_drop
+        fall = self.nrmse(sse0, data) - max(self.nrmse(sse1, data), f)
+        ok = explained >= self.min_gain and b < 0 and fall >= need
         return bool(ok), float(explained), float(b)
 
     def h0(self, model: AxisModel) -> Estimate:
