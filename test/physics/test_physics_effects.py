@@ -84,6 +84,9 @@ BAD = [
     ('position_friction', {'x': [0.0, 0.1], 'dfc': [0.0, None]}, 'position_friction.dfc[1]'),
     ('position_friction', {'x': '0 0.1', 'dfc': [0.0, 1.0]}, 'position_friction.x'),
     ('position_friction', {'x': 0.1, 'dfc': [0.0, 1.0]}, 'position_friction.x'),
+    ('position_friction', {'x': [0.0, 1e-12], 'dfc': [0.0, 1.0]}, 'closer than 1e-09'),
+    ('position_friction', {'x': [0.0, 2e6], 'dfc': [0.0, 1.0]}, 'position_friction.x[1]'),
+    ('position_friction', {'x': [0.0, 1.0], 'dfc': [0.0, -2e9]}, 'position_friction.dfc[1]'),
 ]
 
 

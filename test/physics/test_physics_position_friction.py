@@ -264,3 +264,28 @@ def test_regressors_are_basis_times_direction():
     v = np.where(np.arange(301) % 2 == 0, 0.1, -0.2)
     np.testing.assert_allclose(pf.regressors(x, v) @ np.array(SPOT['dfc']),
                                pf.force(x, v), rtol=0, atol=1e-12)
+
+
+_ANY_FLOAT = st.one_of(st.floats(allow_nan=True, allow_infinity=True),
+                      st.floats(-1e-300, 1e-300), st.sampled_from([-1e308, 1e308]))
+
+
+@settings(max_examples=400, deadline=None)
+@given(x=st.one_of(st.lists(_ANY_FLOAT, max_size=40),
+                   st.lists(_ANY_FLOAT, max_size=40, unique=True).map(sorted)),
+       dfc=st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=40),
+       fc=st.floats(0.0, 1e308))
+def test_any_knots_give_a_model_or_a_one_line_parameter_error(x, dfc, fc):
+    # untrusted model files: sorted, extreme or degenerate knots never escape as another
+    # exception (what the CLI would call an internal error), and an accepted model has a
+    # finite level everywhere
+    try:
+        pf = make_effect('position_friction', {'x': x, 'dfc': dfc[:len(x)]})
+        from motor_comp.physics import AxisModel
+        m = AxisModel(mass=1.0, effects=(make_effect('coulomb', {'fc': fc}), pf))
+    except ParameterError as exc:
+        assert '\n' not in str(exc)
+        return
+    probe = np.concatenate([pf.knots, 0.5 * (pf.knots[1:] + pf.knots[:-1])])
+    level = m.fc + m.dry_friction_shift(probe)
+    assert np.all(np.isfinite(level)) and np.all(level >= -1e-9 * (np.abs(level).max() + 1))

@@ -22,7 +22,8 @@ so it passes through every knot value exactly, and the compiled law
 (:func:`spline_sum`) is a bisection and one cubic.  A law evaluated inside the plant's
 RK4 stages cannot call scipy, which is why the evaluation is written here.
 
-Bounds: at most :data:`MAX_KNOTS` knots, strictly increasing, finite.  The level
+Bounds: 2..:data:`MAX_KNOTS` knots, strictly increasing by at least
+:data:`MIN_SPACING`, within ±:data:`MAX_POSITION`; ``|dfc| <= MAX_LEVEL``.  The level
 ``fc + dfc(x)`` must not go below 0 anywhere: the model (:class:`AxisModel`) checks
 ``fc + min dfc(x) >= 0`` over the knots' span (the spline may dip below its lowest knot
 value between knots: :attr:`PositionFriction.lowest` finds the true minimum).  What the
@@ -46,6 +47,14 @@ from motor_comp.physics.effects.base import Effect
 
 #: largest number of knots the compiled kernels carry
 MAX_KNOTS = 32
+#: knots lie within ±this [m or rad]: 1000 km of travel or 160 000 revolutions, beyond
+#: any axis, and far enough from overflow for the spline's powers of the spacing
+MAX_POSITION = 1e6
+#: closest knot spacing [m or rad]: a friction profile finer than a nanometre (or
+#: nanoradian) is below any encoder; it also keeps the slopes ``dfc/spacing`` finite
+MIN_SPACING = 1e-9
+#: largest |dfc| at a knot [N or N·m]
+MAX_LEVEL = 1e9
 
 
 @njit(cache=True, inline='always', error_model='numpy')
@@ -155,12 +164,26 @@ class PositionFriction(Effect):
                 raise ParameterError(
                     f'position_friction.x [m] must be strictly increasing, but x[{i}] = '
                     f'{knots[i]:g} <= x[{i - 1}] = {knots[i - 1]:g}')
+            if not knots[i] - knots[i - 1] >= MIN_SPACING:
+                raise ParameterError(
+                    f'position_friction.x [m]: knots x[{i - 1}] and x[{i}] are closer than '
+                    f'{MIN_SPACING:g} m')
+        for i, xk in enumerate(knots):
+            if abs(xk) > MAX_POSITION:
+                raise ParameterError(f'position_friction.x[{i}] [m] must lie within '
+                                     f'±{MAX_POSITION:g}, got {xk:g}')
+        for i, yk in enumerate(values):
+            if abs(yk) > MAX_LEVEL:
+                raise ParameterError(f'position_friction.dfc[{i}] [N] must lie within '
+                                     f'±{MAX_LEVEL:g}, got {yk:g}')
         object.__setattr__(self, 'x', knots)
         object.__setattr__(self, 'dfc', values)
-        slopes = slope_matrix(np.array(knots)) @ np.array(values)
-        if not np.all(np.isfinite(slopes)):   # knots closer than the values can bend
-            raise ParameterError('position_friction.x [m]: knots too close together for '
-                                 'the spline through dfc (its slopes overflow)')
+        try:
+            slopes = slope_matrix(np.array(knots)) @ np.array(values)
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+            slopes = np.array([np.nan])
+        if not np.all(np.isfinite(slopes)):   # not reached within the bounds above
+            raise ParameterError('position_friction: no finite spline through these knots')
         slopes.setflags(write=False)
         # derived, not a field: equality, the model file and replace() see x and dfc only
         object.__setattr__(self, '_slopes', slopes)
