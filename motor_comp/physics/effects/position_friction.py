@@ -40,7 +40,6 @@ from typing import Any
 
 import numpy as np
 from numba import njit
-from scipy.interpolate import CubicSpline
 
 from motor_comp.errors import ParameterError, check_finite
 from motor_comp.physics.effects.base import Effect
@@ -124,6 +123,9 @@ def slope_matrix(knots: np.ndarray) -> np.ndarray:
     Column ``j`` holds the slopes of the spline through the unit values ``e_j``
     (:class:`scipy.interpolate.CubicSpline`, ``bc_type='clamped'``: zero end slopes).
     """
+    # imported here: scipy.interpolate costs every `motor-comp` start ~0.25 s of CPU,
+    # and only a model with this effect needs it
+    from scipy.interpolate import CubicSpline
     knots = np.asarray(knots, dtype=float)
     n = knots.shape[0]
     S = CubicSpline(knots, np.eye(n), bc_type='clamped', axis=0)(knots, 1)
@@ -264,6 +266,7 @@ class PositionFriction(Effect):
         (roots of the spline's derivative, :meth:`scipy.interpolate.PPoly.roots`); the
         values there come from this module's own law.
         """
+        from scipy.interpolate import CubicSpline   # see slope_matrix
         cs = CubicSpline(self.knots, self.values, bc_type='clamped')
         crit = cs.derivative().roots(extrapolate=False)
         lo, hi = self.span
