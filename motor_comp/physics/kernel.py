@@ -35,14 +35,15 @@ tests).
 
 The level shift must cost an axis without those effects nothing: an inlined shift in
 the RK4 stages (even one behind a branch), or merely handing the array ``P`` to the
-inlined helpers (reference counting), slowed the PMLM step by 10–30 % (measured with
-``bench/sim_speed.py``'s kernel loop).  So the body of the advance (:func:`_advance`)
-takes a *shift source* ``src`` whose type selects the law at compile time
-(:func:`_shift`): the float ``NO_SHIFT`` (−0.0, which ``x + (−0.0) = x`` lets LLVM fold
-away: the plain axis runs the code it ran before, bit for bit) in the copy inlined into
-:func:`plant_advance`, the array ``P`` in :func:`_advance_shifted`, a separate compiled
-function that :func:`plant_advance` calls instead when ``mu ≠ 0`` or the model has
-knots.
+inlined helpers (reference counting), slowed the PMLM step by 10–30 %, and a copy of the
+static step called behind a per-step branch by 2–4 % (``bench/sim_speed.py``'s loops).
+So the helpers take a *shift source* ``src`` whose type selects the law while compiling
+(:func:`_shift`): None, which adds ``NO_SHIFT`` (−0.0; ``x + (−0.0) = x`` lets LLVM fold
+it away: the plain axis runs the code it ran before, bit for bit), or the array ``P``.
+:func:`plant_advance` as the drivers call it is the None version; for a model with
+``mu ≠ 0`` or knots it calls :data:`_advance_shifted`, the same function compiled a
+second time with ``P`` as the source.  The price is compile time: the second copy
+roughly doubles the kernel's first (uncached) compilation.
 """
 from __future__ import annotations
 
@@ -95,8 +96,8 @@ P_PF_Y = P_PF_X + MAX_KNOTS       # dfc at the knots [N]
 P_PF_M = P_PF_Y + MAX_KNOTS       # spline slopes at the knots [N/m]
 P_SIZE = P_PF_M + MAX_KNOTS
 
-#: the shift source of an axis without load- or position-dependent friction (module
-#: docstring): a float, and −0.0 so that adding it is the identity LLVM removes
+#: the level shift of an axis without load- or position-dependent friction (module
+#: docstring): −0.0, so that adding it is the identity LLVM removes
 NO_SHIFT = -0.0
 
 # _axis below unpacks the ripple amplitudes as 16-tuples
@@ -166,7 +167,9 @@ def level_shift(P, x, v, u):
 def _shift(src, x, v, u):
     """Level shift [N] from a shift source: :func:`level_shift` of ``P``, or ``NO_SHIFT``.
 
-    The pure-Python form (``NUMBA_DISABLE_JIT=1``); compiled, the overload below picks
+    ``src`` is the packed ``P``, or None for an axis without load- or position-dependent
+    friction (and in the GMS stages, whose friction is the elements').  The pure-Python
+    form (``NUMBA_DISABLE_JIT=1``); compiled, the overload below picks
     the law from the *type* of ``src`` while typing, so no branch is left in the code.
     """
     if isinstance(src, np.ndarray):
@@ -174,9 +177,9 @@ def _shift(src, x, v, u):
     return NO_SHIFT
 
 
-@overload(_shift, inline='always', jit_options=_JIT)
+@overload(_shift, jit_options=_JIT)   # not inlined at IR level: LLVM inlines it anyway
 def _shift_compiled(src, x, v, u):
-    """Compile :func:`_shift`: ``level_shift`` for an array source, −0.0 for a float."""
+    """Compile :func:`_shift`: ``level_shift`` for an array source, −0.0 for None."""
     if isinstance(src, types.Array):
         return lambda src, x, v, u: level_shift(src, x, v, u)
     return lambda src, x, v, u: NO_SHIFT
@@ -353,7 +356,7 @@ def _delayed_command(S, u, nbuf, n0, frac):
 
 
 @njit(**_JIT)
-def plant_advance(P, S, u, f_ext, n_sub):
+def plant_advance(P, S, u, f_ext, n_sub, shift_source=None):
     """Advance ``n_sub`` physics steps ``P[P_DT]`` holding command ``u`` and load ``f_ext``.
 
     Parameters
@@ -368,24 +371,20 @@ def plant_advance(P, S, u, f_ext, n_sub):
         External load force [N], subtracted like every effect force.
     n_sub : int
         Number of physics steps.
+    shift_source : None or ndarray
+        Internal; drivers leave it out.  The shift source of the friction level
+        (:func:`_shift`): left out, a model with load- or position-dependent friction
+        is handed to :data:`_advance_shifted` (this function compiled a second time,
+        with ``P`` as the source).  ``shift_source is None`` is decided while
+        compiling, so each compiled version holds one law only.
     """
     if n_sub <= 0:
         return
-    if P[P_LF_MU] != 0.0 or P[P_PF_N] > 0.0:
-        _advance_shifted(P, S, u, f_ext, n_sub)
-    else:
-        _advance(P, S, u, f_ext, n_sub, NO_SHIFT)
-
-
-@njit(**_JIT)
-def _advance_shifted(P, S, u, f_ext, n_sub):
-    """:func:`_advance` with the load- and position-dependent friction of ``P``."""
-    _advance(P, S, u, f_ext, n_sub, P)
-
-
-@njit(**_INLINE)
-def _advance(P, S, u, f_ext, n_sub, src):
-    """Run the body of :func:`plant_advance`; ``src`` is the shift source (:func:`_shift`)."""
+    if shift_source is None:
+        if P[P_LF_MU] != 0.0 or P[P_PF_N] > 0.0:
+            _advance_shifted(P, S, u, f_ext, n_sub, P)
+            return
+    src = shift_source
     A = _axis(P)
     dt = A.dt
     umax = P[P_UMAX]
@@ -432,7 +431,8 @@ def _advance(P, S, u, f_ext, n_sub, src):
                     # at the step's start (Ḟ_i from the published slip law)
                     f_gms += P[P_GMS_SIGMA + i] / P[P_GMS_K + i] * gms_slip_rate(
                         fi, P[P_GMS_ALPHA + i], attraction, s_v)
-            xn, vn, _ = _rk4_frozen(A, NO_SHIFT, x, v, ueff, f_ext, 0.0, f_gms, k_stick,
+            # (GMS: the friction inside the step is the elements', no level to shift)
+            xn, vn, _ = _rk4_frozen(A, None, x, v, ueff, f_ext, 0.0, f_gms, k_stick,
                                     c_stick, dt, rip)
             # the elements follow the direction-dependent Stribeck curve (fc±, fs± of the
             # asymmetry effect), so asymmetry acts on the dynamics, not only on the report;
@@ -458,6 +458,12 @@ def _advance(P, S, u, f_ext, n_sub, src):
         rip -= gravity_torque(x, A.mgl, A.q0)
     S[S_RIPPLE] = rip
     S[S_UEFF] = ueff
+
+
+#: :func:`plant_advance` compiled on its own, called with ``shift_source = P``: the copy
+#: of the step with load- and position-dependent friction (a second dispatcher, so the
+#: plain version calls it without recursion)
+_advance_shifted = njit(**_JIT)(getattr(plant_advance, 'py_func', plant_advance))
 
 
 @njit(**_JIT)
