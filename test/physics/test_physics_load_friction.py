@@ -22,6 +22,7 @@ from motor_comp.errors import ParameterError
 from motor_comp.physics import kernel as K
 from motor_comp.physics.effects import make_effect
 from motor_comp.physics.effects.load_friction import load_friction_drive_force
+from motor_comp.physics.plant import Sensors, pack_params
 
 FC, FS, FV, MU = 5.0, 8.0, 40.0, 0.25
 GMS = ('presliding', {'alpha': [0.6, 0.4], 'k': [2e6, 4e5], 'C': 6000.0,
@@ -229,7 +230,6 @@ def test_regressor_column_reproduces_the_force():
 
 def test_the_kernel_gets_mu_in_its_slot():
     # the packed coefficient is the effect's; an axis without it packs 0 (plain path)
-    from motor_comp.physics.plant import Sensors, pack_params
     m = model(('coulomb', {'fc': FC}), ('load_friction', {'mu': MU}))
     assert pack_params(m, Sensors(), DT)[K.P_LF_MU] == MU
     assert pack_params(m.without('load_friction'), Sensors(), DT)[K.P_LF_MU] == 0.0

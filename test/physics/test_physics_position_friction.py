@@ -21,6 +21,7 @@ from scipy.interpolate import CubicSpline
 from scipy.optimize import brentq
 
 from motor_comp.errors import ParameterError
+from motor_comp.physics import AxisModel
 from motor_comp.physics import kernel as K
 from motor_comp.physics.effects import make_effect
 from motor_comp.physics.effects.position_friction import MAX_KNOTS, PositionFriction
@@ -252,7 +253,6 @@ def test_level_below_zero_between_knots_is_refused_naming_the_place():
 
 
 def test_rotary_axis_reads_rad_and_newton_metres():
-    from motor_comp.physics import AxisModel
     pf = make_effect('position_friction', {'x': [0.0, math.pi], 'dfc': [-2.0, 0.0]})
     with pytest.raises(ParameterError, match='N·m at x = 0 rad'):
         AxisModel(mass=0.01, axis='rotary', effects=(make_effect('coulomb', {'fc': 1.0}), pf))
@@ -267,7 +267,7 @@ def test_regressors_are_basis_times_direction():
 
 
 _ANY_FLOAT = st.one_of(st.floats(allow_nan=True, allow_infinity=True),
-                      st.floats(-1e-300, 1e-300), st.sampled_from([-1e308, 1e308]))
+                       st.floats(-1e-300, 1e-300), st.sampled_from([-1e308, 1e308]))
 
 
 @settings(max_examples=400, deadline=None)
@@ -281,7 +281,6 @@ def test_any_knots_give_a_model_or_a_one_line_parameter_error(x, dfc, fc):
     # finite level everywhere
     try:
         pf = make_effect('position_friction', {'x': x, 'dfc': dfc[:len(x)]})
-        from motor_comp.physics import AxisModel
         m = AxisModel(mass=1.0, effects=(make_effect('coulomb', {'fc': fc}), pf))
     except ParameterError as exc:
         assert '\n' not in str(exc)
