@@ -24,7 +24,7 @@ from motor_comp.workbench.result import Estimate, estimate
 from motor_comp.workbench.scan import scan
 from motor_comp.workbench.uncertainty import measurement_spread, processing_spread, \
     profile_se
-from motor_comp.workbench.varpro import search
+from motor_comp.workbench.varpro import search, searched
 from motor_comp.workbench.wording import MASS, REFIT, common_scale, experiment_notes, \
     fmt_param, identifiability_notes, model_scalars, scale_forces, significant_changes
 
@@ -172,7 +172,7 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
             continue
         D = eng.data_for(est.spec.with_(name, {}))
         eta = search(D, est.spec.with_(name, {}), name, est.model) \
-            if TERMS[name].params else {}
+            if searched(TERMS[name]) else {}
         est = sel.research(eng, estimate(D, est.spec.with_(name, eta), est.model), name)
         step(name, 'add', est, '')
     if auto:

@@ -276,7 +276,10 @@ def theta_of(model: AxisModel, spec: Spec, ctx: Context) -> np.ndarray:
     coef: dict[tuple, float] = {MASS: model.mass}
     for n in spec.names:
         for k, v in TERMS[n].decode(model)[0].items():
-            coef[(n, k)] = float(v)
+            # a term may hand part of its law to another's coefficient (a position
+            # friction's level at its first knot is the Coulomb level)
+            lab = k if isinstance(k, tuple) else (n, k)
+            coef[lab] = coef.get(lab, 0.0) + float(v)
     owned = owned_columns(spec, ctx)
     owner: dict[str, tuple] = {c.basis: (n, c.label) for n, c in owned if c.basis}
     out_labels = labels(spec, ctx)

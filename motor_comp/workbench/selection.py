@@ -59,7 +59,7 @@ from motor_comp.workbench.library import ORDER, Spec, given_sse, n_params, proce
     reaches_stops, spec_of
 from motor_comp.workbench.lsq import bic
 from motor_comp.workbench.result import Estimate, estimate
-from motor_comp.workbench.varpro import cv_candidate, cv_design, search
+from motor_comp.workbench.varpro import cv_candidate, cv_design, search, searched
 from motor_comp.workbench.wording import MASS, REFIT, ROTARY_UNITS, TITLES, ParameterChange, \
     axis_units, common_scale, directions, fmt_param, model_scalars, scale_forces, \
     significant_changes
@@ -442,7 +442,7 @@ def nested(spec: Spec, name: str) -> list[str]:
     out = []
     for n in ORDER:
         t = TERMS[n]
-        if n in spec.names or t.params:
+        if n in spec.names or searched(t):
             continue
         cols = t.columns({}, ctx)
         if cols and all(c.basis and c.basis in mine for c in cols):

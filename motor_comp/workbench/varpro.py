@@ -41,6 +41,11 @@ from motor_comp.workbench.library import Spec, context, design, values_of
 from motor_comp.workbench.lsq import bic, cv_grams, solve_gram, sse_with
 
 
+def searched(t: Term) -> bool:
+    """Whether a term has anything to search: nonlinear parameters or a structure."""
+    return bool(t.params) or type(t).orders is not Term.orders
+
+
 def vp_sse(data: Dataset, spec: Spec, model: AxisModel | None,
            rows: np.ndarray | None = None, weights: SpeedWeights | None = None) -> float:
     """Return the SSE of ``spec`` at its nonlinear parameters, every coefficient re-solved."""
@@ -148,8 +153,13 @@ class Search:
         costs = [self.cost(e) for e in trials]
         i = int(np.argmin(costs))
         eta = trials[i]
-        if costs[i] > stop_above or not self.term.nonlinear(eta):
+        if costs[i] > stop_above:
             return eta
+        if not self.term.nonlinear(eta):
+            # a structure without continuous parameters (the knots of a friction along
+            # the travel): only its order is chosen
+            lo, hi = self.term.orders(self.data.summary, eta)
+            return self._order(eta, lo, hi) if hi > lo else eta
         vector = [p for p in self.space.values() if p.vector]
         if vector:
             return self._vector(eta, vector[0], refine)
@@ -453,7 +463,7 @@ def cv_candidate(data: Dataset, spec: Spec, name: str, model: AxisModel | None, 
     (it cannot pay on held-out data anyway, and the in-fold choices are the cost).
     """
     t = TERMS[name]
-    if not t.params:
+    if not searched(t):
         return cv_design(data, spec.with_(name), model)[0], {}
     sse0 = vp_sse(data, spec, model) if screen > 0 else math.inf
     eta_all = search(data, spec.with_(name, {}), name, model,
@@ -468,5 +478,5 @@ def cv_candidate(data: Dataset, spec: Spec, name: str, model: AxisModel | None, 
     return cv_choices(data, [spec.with_(name, e) for e in trials], model), eta_all
 
 
-__all__ = ['Search', 'cv_candidate', 'cv_choices', 'cv_design', 'fold_trials',
+__all__ = ['Search', 'searched', 'cv_candidate', 'cv_choices', 'cv_design', 'fold_trials',
            'refine_structure', 'search', 'vp_sse']

@@ -32,9 +32,10 @@ VOCABULARY: tuple[str, ...] = tuple(EFFECTS)
 
 def _terms() -> dict[str, Term]:
     from motor_comp.physics.effects import asymmetry, backlash, coulomb, delay, gravity, \
-        offset, presliding, ripple, spring, stribeck, viscous
+        load_friction, offset, position_friction, presliding, ripple, spring, stribeck, \
+        viscous
     mods = (coulomb, viscous, stribeck, presliding, ripple, offset, spring, asymmetry, delay,
-            backlash, gravity)
+            backlash, gravity, load_friction, position_friction)
     return {m.TERM.name: m.TERM for m in mods}
 
 

@@ -29,12 +29,14 @@ Units: mu [-], forces [N]; on a rotary axis torques [N·m].
 from __future__ import annotations
 
 import dataclasses
+from typing import Any, Mapping
 
 import numpy as np
 from numba import njit
 
 from motor_comp.errors import ParameterError, check_nonnegative
 from motor_comp.physics.effects.base import Effect
+from motor_comp.physics.effects.identification import Column, Context, Term
 
 
 @njit(cache=True, inline='always', error_model='numpy')
@@ -139,3 +141,41 @@ class LoadFriction(Effect):
         """Column ``|F_in|·sgn(v)``; coefficient ``mu`` [-]."""
         v = np.asarray(v, dtype=float).ravel()
         return (np.abs(np.asarray(f_in, dtype=float).ravel()) * np.sign(v))[:, None]
+
+
+class LoadFrictionTerm(Term):
+    """Identification of load-dependent friction: ``mu`` on ``|F_in|·sgn ẋ``.
+
+    The column is the drive force the run transmits (the delayed command, after the
+    back-EMF and damping), signed like the Coulomb column (the turn model's shares).
+    ``0 ≤ mu < 1`` inside the estimator.  While the drive pushes along the motion the
+    law copies a larger mass, Coulomb and viscous level (``1/(1 − mu)``); only samples
+    where the drive brakes the motion tell them apart, which the columns judge.
+    """
+
+    name = 'load_friction'
+    effect = LoadFriction
+    requires = ('coulomb',)
+    dry_friction = True
+    force_scaled = ()
+
+    def columns(self, eta: Mapping, ctx: Context) -> list[Column]:
+        """Return the ``mu`` column."""
+        return [Column('mu', ('load_friction',), lambda p: np.abs(p.f_in) * (p.fwd - p.bwd),
+                       lo=0.0, hi=0.99 * MU_LIMIT, uses_input=True)]
+
+    def encode(self, values: Mapping, eta: Mapping, ctx: Context) -> list[Effect]:
+        """Return the fitted load friction."""
+        mu = float(values.get((self.name, 'mu'), 0.0))
+        return [LoadFriction(mu=min(max(mu, 0.0), 0.99 * MU_LIMIT))]
+
+    def decode(self, model: Any) -> tuple[dict, dict]:
+        """Return ``mu``."""
+        return {'mu': model.get(self.name).mu}, {}
+
+    def scalars(self, eta: Mapping, ctx: Context) -> dict:
+        """Report ``mu`` [-]."""
+        return {(self.name, 'mu'): lambda v: float(v.get((self.name, 'mu'), 0.0))}
+
+
+TERM = LoadFrictionTerm()

@@ -36,13 +36,14 @@ Units: x [m], dfc [N]; on a rotary axis read rad and N·m.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 from numba import njit
 
 from motor_comp.errors import ParameterError, check_finite
 from motor_comp.physics.effects.base import Effect
+from motor_comp.physics.effects.identification import Column, Context, Summary, Term
 
 #: largest number of knots the compiled kernels carry
 MAX_KNOTS = 32
@@ -285,3 +286,104 @@ def _numbers(key: str, unit: str, seq: Any) -> tuple[float, ...]:
     if isinstance(seq, (str, bytes)) or not hasattr(seq, '__iter__'):
         raise ParameterError(f'{key} [{unit}] must be a list of numbers')
     return tuple(check_finite(f'{key}[{i}] [{unit}]', v) for i, v in enumerate(seq))
+
+
+#: knot counts the identification chooses among (by an information criterion)
+FIT_KNOTS = (4, 24)
+
+
+def uniform_knots(lo: float, hi: float, n: int) -> tuple[float, ...]:
+    """Return ``n`` knots spread evenly over ``[lo, hi]`` [m]."""
+    return tuple(float(v) for v in np.linspace(lo, hi, int(n)))
+
+
+class PositionFrictionTerm(Term):
+    """Identification of friction that varies along the travel: knot values on splines.
+
+    With the knots held (spread evenly over the travel seen), ``dfc(x) = Σ_j dfc_j·b_j(x)``
+    is linear in the knot values, so each knot's column is its basis function times the
+    signed share of sliding (a friction flips with the motion).  The basis functions sum
+    to 1, so a constant ``dfc`` is the Coulomb level: the first knot's value is held at 0
+    (the friction along the travel is told relative to the travel's start) and the level
+    there is ``fc``.  The knot count is the term's order, chosen by an information
+    criterion (4–24 knots).  Inside the estimator the level stays a friction at every
+    knot, ``fc + dfc_j ≥ 0``.
+    """
+
+    name = 'position_friction'
+    effect = PositionFriction
+    requires = ('coulomb',)
+    dry_friction = True
+
+    def orders(self, s: Summary, eta: Mapping) -> tuple[int, int]:
+        """Return the knot counts allowed."""
+        return FIT_KNOTS
+
+    def order_of(self, eta: Mapping) -> int:
+        """Return the knot count."""
+        return len(eta.get('x', ()))
+
+    def with_order(self, eta: Mapping, order: int) -> dict:
+        """Return ``eta`` with ``order`` knots over the same span."""
+        x = eta['x']
+        return dict(eta, x=uniform_knots(x[0], x[-1], order))
+
+    def initial(self, s: Summary, ctx: Context, profile: Any) -> list[dict]:
+        """Return eight knots over the travel seen."""
+        return [{'x': uniform_knots(s.span[0], s.span[1], 8)}]
+
+    def columns(self, eta: Mapping, ctx: Context) -> list[Column]:
+        """Return one column per knot but the first."""
+        knots = tuple(eta['x'])
+        pf = PositionFriction(x=knots, dfc=(0.0,) * len(knots))
+
+        def block(p: Any) -> np.ndarray:
+            return pf.basis(p.x)[:, 1:] * (p.fwd - p.bwd)[:, None]
+        return [Column(f'dfc{j}', ('position_friction', knots, j), block,
+                       width=len(knots) - 1, index=j - 1) for j in range(1, len(knots))]
+
+    def constraints(self, ctx: Context) -> list:
+        """Keep the level a friction at every knot, ``fc + dfc_j ≥ 0``."""
+        if 'coulomb' not in ctx.present or 'presliding' in ctx.present:
+            return []
+        knots = ctx.eta.get(self.name, {}).get('x', ())
+        return [({('coulomb', 'fc'): 1.0, (self.name, f'dfc{j}'): 1.0}, 0.0)
+                for j in range(1, len(knots))]
+
+    def _dfc(self, values: Mapping, n: int) -> tuple[float, ...]:
+        return (0.0,) + tuple(float(values.get((self.name, f'dfc{j}'), 0.0))
+                              for j in range(1, n))
+
+    def encode(self, values: Mapping, eta: Mapping, ctx: Context) -> list[Effect]:
+        """Return the fitted friction along the travel."""
+        knots = tuple(eta['x'])
+        dfc = self._dfc(values, len(knots))
+        pf = PositionFriction(x=knots, dfc=dfc)
+        fc = float(values.get(('coulomb', 'fc'), 0.0))
+        low = pf.lowest[1]
+        if fc + low < 0.0:        # a dip of the spline between knots below zero friction
+            pf = PositionFriction(x=knots, dfc=tuple(d - (fc + low) for d in dfc))
+        return [pf]
+
+    def decode(self, model: Any) -> tuple[dict, dict]:
+        """Return the knot values relative to the first (its value goes to ``fc``)."""
+        e = model.get(self.name)
+        d0 = e.dfc[0]
+        coef: dict = {f'dfc{j}': v - d0 for j, v in enumerate(e.dfc) if j}
+        if d0:
+            coef[('coulomb', 'fc')] = d0
+        return coef, {'x': tuple(e.x)}
+
+    def scalars(self, eta: Mapping, ctx: Context) -> dict:
+        """Report the rise [N] along the travel and where it peaks [m]."""
+        knots = tuple(eta['x'])
+        grid = np.linspace(knots[0], knots[-1], 400)
+        basis = PositionFriction(x=knots, dfc=(0.0,) * len(knots)).basis(grid)
+
+        def curve(v: Mapping) -> np.ndarray:
+            return basis @ np.array(self._dfc(v, len(knots)))
+        return {(self.name, 'rise'): lambda v: float(np.ptp(curve(v))),
+                (self.name, 'x_peak'): lambda v: float(grid[int(np.argmax(curve(v)))])}
+
+
+TERM = PositionFrictionTerm()
