@@ -27,6 +27,7 @@ from motor_comp.errors import ParameterError
 from motor_comp.physics.axis import AxisModel, Units
 from motor_comp.threads import single_threaded_blas
 from motor_comp.workbench import selection as sel
+from motor_comp.workbench.aliases import ambiguities
 from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.library import ORDER
 from motor_comp.workbench.residual import Residual, residual
@@ -201,7 +202,15 @@ def diagnose(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *, folds:
     un = scan(eng.data_for(h0.spec), h0, eng.floor(h0), units=eng.units)
     best = next((c for c in results if c.supported), None)
     corr = best.correlations if best is not None else h0.correlations
-    ident_notes = identifiability_notes(corr)
+    final = best.estimate if best is not None and best.estimate is not None else h0
+    aliases = ambiguities(eng.data_for(final.spec), final)
+    ident_notes = [a.sentence() for a in aliases] + identifiability_notes(corr)
+    if best is not None and any(a.effect == best.effect for a in aliases):
+        # the finding is one of several readings of this run
+        others = ', '.join(a.other for a in aliases if a.effect == best.effect)
+        i = results.index(best)
+        results[i] = dataclasses.replace(best, why_not=f'or {others}: cannot be told apart '
+                                                       'on this run')
     exp = experiment_notes(eng.summary, eng.units)
     g = gain_note(common_scale(model, h0), model)
     if g:

@@ -18,9 +18,11 @@ from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import TERMS
 from motor_comp.threads import single_threaded_blas
 from motor_comp.workbench import selection as sel
+from motor_comp.workbench.aliases import ambiguities
 from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.library import ORDER
 from motor_comp.workbench.result import Estimate, estimate
+from motor_comp.workbench.reweight import reweighted
 from motor_comp.workbench.scan import scan
 from motor_comp.workbench.uncertainty import measurement_spread, processing_spread, \
     profile_se
@@ -179,7 +181,7 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
         est = sel.select(eng, est, step, say, max_steps)
     exp = experiment_notes(eng.summary, u)
     unweighted = est
-    rw = sel.reweighted(eng, est)
+    rw = reweighted(eng, est)
     weights = None
     if rw is not None:
         est, text, removed = rw
@@ -204,8 +206,11 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
         say(steps[-1].summary)
     un = scan(eng.data_for(est.spec), est, eng.floor(est), units=u)
     say(un.summary)
+    notes = [a.sentence() for a in ambiguities(eng.data_for(est.spec), est)]
+    for note in notes:
+        say(f'cannot tell apart: {note}')
     return FitResult(steps=tuple(steps), model=final, uncertainty=unc,
-                     identifiability=tuple(identifiability_notes(est.correlations)),
+                     identifiability=tuple(notes + identifiability_notes(est.correlations)),
                      experiment=tuple(exp), at_bound=dict(est.at_bound),
                      params=model_scalars(final), unexplained=un)
 

@@ -42,6 +42,9 @@ class Estimate:
         Their standard errors (stretch jackknife + delta method).
     at_bound : dict[str, list[str]]
         Coefficients the estimator held on a declared bound (``fc ≥ 0`` …).
+    at_limit : dict[str, list[str]]
+        Those held on a declared upper limit: the data want the effect beyond what the
+        term declares physical (a fit there is not that effect).
     correlations : list of (str, str, float)
         Strongly correlated parameter pairs ``(group.name, group.name, ρ)``.
     sse_cv, sse_fit : float
@@ -66,6 +69,7 @@ class Estimate:
     n_params: int
     nrmse_cv: float
     inadmissible: dict = dataclasses.field(default_factory=dict)
+    at_limit: dict = dataclasses.field(default_factory=dict)
 
 
 def estimate(data: Dataset, spec: Spec, model: AxisModel, *, cv: bool = True,
@@ -79,9 +83,12 @@ def estimate(data: Dataset, spec: Spec, model: AxisModel, *, cv: bool = True,
     d = design(data, spec, model, weights=weights)
     th, _ = solve_gram(d.gram(), d.bounds)
     at_bound: dict[str, list[str]] = {}
-    for lab, hit in zip(d.labels, d.bounds.at_bound(th)):
+    at_limit: dict[str, list[str]] = {}
+    for lab, hit, v, hi in zip(d.labels, d.bounds.at_bound(th), th, d.bounds.hi):
         if hit:
             at_bound.setdefault(lab[0], []).append(lab[1])
+            if np.isfinite(hi) and abs(v - hi) <= 1e-9 * max(abs(hi), 1.0):
+                at_limit.setdefault(lab[0], []).append(lab[1])
     sse_cv = cv_design(data, spec, model, weights)[0] if cv else float('nan')
     nr = math.sqrt(sse_cv / data.den) if data.den > 0 and np.isfinite(sse_cv) else float('nan')
     why = {}
@@ -89,9 +96,13 @@ def estimate(data: Dataset, spec: Spec, model: AxisModel, *, cv: bool = True,
         reason = TERMS[n].admissible(vals, spec.of(n), data.summary)
         if reason:
             why[n] = reason
+        elif n in at_limit:
+            why[n] = (f'{", ".join(at_limit[n])} at the limit the effect declares physical: '
+                      'the data want it beyond what it can be')
     return Estimate(spec=spec, model=encode(spec, vals, model), values=vals, scalars=sc, se=se,
                     at_bound=at_bound, correlations=corr, sse_cv=sse_cv, sse_fit=jac.sse,
-                    n_params=n_params(spec), nrmse_cv=nr, inadmissible=why)
+                    n_params=n_params(spec), nrmse_cv=nr, inadmissible=why,
+                    at_limit=at_limit)
 
 
 def replace(est: Estimate, **changes: Any) -> Estimate:

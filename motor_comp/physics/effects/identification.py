@@ -338,6 +338,16 @@ class Term:
         """Return the values tried inside each fold (None: the parameter's ``steps``)."""
         return None
 
+    def aliases(self, s: Summary) -> list[dict]:
+        """Return parameters at which the term could stand for another's force.
+
+        Used to say which effects a run cannot tell apart, not to fit: a term without
+        a search is itself; a searched term declares the values outside its fitting
+        space that mimic others (a ripple longer than the travel); none by default.
+        """
+        searched = bool(self.params) or type(self).orders is not Term.orders
+        return [] if searched else [{}]
+
     def initial(self, s: Summary, ctx: Context, profile: Any) -> list[dict]:
         """Return starts of the search from the current residual (empty: the grid)."""
         return []

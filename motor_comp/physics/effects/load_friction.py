@@ -143,14 +143,21 @@ class LoadFriction(Effect):
         return (np.abs(np.asarray(f_in, dtype=float).ravel()) * np.sign(v))[:, None]
 
 
+#: the largest mu the identification fits (see :class:`LoadFrictionTerm`)
+MU_FIT_LIMIT = 0.5
+
+
 class LoadFrictionTerm(Term):
     """Identification of load-dependent friction: ``mu`` on ``|F_in|·sgn ẋ``.
 
     The column is the drive force the run transmits (the delayed command, after the
     back-EMF and damping), signed like the Coulomb column (the turn model's shares).
-    ``0 ≤ mu < 1`` inside the estimator.  While the drive pushes along the motion the
-    law copies a larger mass, Coulomb and viscous level (``1/(1 − mu)``); only samples
-    where the drive brakes the motion tell them apart, which the columns judge.
+    ``0 ≤ mu ≤ 0.5`` inside the estimator: a drive that loses more than half its force
+    to friction is self-locking, and a fit that wants more is making the friction carry
+    the drive force (at ``mu → 1`` any force the model lacks is "friction").  While the
+    drive pushes along the motion the law copies a larger mass, Coulomb and viscous
+    level (``1/(1 − mu)``); only samples where the drive brakes the motion tell them
+    apart, which the columns judge.
     """
 
     name = 'load_friction'
@@ -162,12 +169,12 @@ class LoadFrictionTerm(Term):
     def columns(self, eta: Mapping, ctx: Context) -> list[Column]:
         """Return the ``mu`` column."""
         return [Column('mu', ('load_friction',), lambda p: np.abs(p.f_in) * (p.fwd - p.bwd),
-                       lo=0.0, hi=0.99 * MU_LIMIT, uses_input=True)]
+                       lo=0.0, hi=MU_FIT_LIMIT, uses_input=True)]
 
     def encode(self, values: Mapping, eta: Mapping, ctx: Context) -> list[Effect]:
         """Return the fitted load friction."""
         mu = float(values.get((self.name, 'mu'), 0.0))
-        return [LoadFriction(mu=min(max(mu, 0.0), 0.99 * MU_LIMIT))]
+        return [LoadFriction(mu=min(max(mu, 0.0), MU_FIT_LIMIT))]
 
     def decode(self, model: Any) -> tuple[dict, dict]:
         """Return ``mu``."""

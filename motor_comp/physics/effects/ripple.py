@@ -219,6 +219,10 @@ class RippleTerm(Term):
         dp = 1.5 * value * value / max(s.travel, 1e-12)
         return tuple(value + k * dp for k in (-0.5, -0.25, 0.0, 0.25, 0.5))
 
+    def aliases(self, s: Summary) -> list[dict]:
+        """Return ripples longer than the travel: over it they are a spring or an offset."""
+        return [{'period': k * max(s.travel, 1e-9), 'harmonics': 1} for k in (1.5, 3, 6, 12)]
+
     def orders(self, s: Summary, eta: Mapping) -> tuple[int, int]:
         """Return the harmonic counts allowed at the period (four samples per period)."""
         min_p = max(4.0 * s.dt * float(s.speeds[50]), 1e-12)
