@@ -50,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``diagnose``."""
     from motor_comp.workbench import diagnose, open_session
     from motor_comp.workbench import report as rep
+    from motor_comp.workbench.report_scan import floor_figure, scan_figure
     s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold,
                      rotary=args.rotary)
     d = diagnose(list(s.kins), s.model, folds=args.folds, min_gain=args.min_gain)
@@ -60,6 +61,14 @@ def run(args: argparse.Namespace) -> int:
         figs = rep.residual_figures(out, s.kin, d.residual, rotary=d.rotary,
                                     closed_loop=rep.is_closed_loop(s.run))
         figs.insert(0, rep.candidates_figure(out, d.candidates))
+        un = d.unexplained
+        if un is not None:
+            figs.insert(1, scan_figure(out, un, rotary=d.rotary))
+            figs.insert(2, floor_figure(out, ['as given', 'refitted'] +
+                                        [c.effect for c in d.candidates],
+                                        [d.baseline_nrmse, d.refit_nrmse] +
+                                        [c.force_nrmse for c in d.candidates],
+                                        un.noise_floor_nrmse))
         page = rep.write_html(out, f'diagnose: {", ".join(d.runs)} with {args.model}', text,
                               figs)
         data['report'] = str(page)

@@ -16,8 +16,9 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from typing import Any
 
-from motor_comp.cli.common import check_output_file, jsonable
+from motor_comp.cli.common import add_report, check_output_file, jsonable
 from motor_comp.cli.compare import add_common, emit
 from motor_comp.cli.diagnose import add_diagnose_options
 from motor_comp.errors import MotorCompError
@@ -36,7 +37,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--auto', action='store_true',
                    help='repeat diagnose -> add until nothing pays for its parameters')
     p.add_argument('-o', '--output', metavar='NEW.yaml', help='write the fitted model here')
+    add_report(p)
     p.set_defaults(func=run)
+
+
+def _report(args: argparse.Namespace, s: Any, result: Any, text: str) -> Any:
+    """Write ``--report DIR``: the fitted model's residual views, scan and floor."""
+    from motor_comp.workbench import report as rep
+    from motor_comp.workbench import residual
+    from motor_comp.workbench.report_scan import floor_figure, scan_figure
+    out = rep.prepare_dir(args.report)
+    rotary = s.model.units.rotary
+    figs = rep.residual_figures(out, s.kin, residual(s.kin, result.model), rotary=rotary,
+                                closed_loop=rep.is_closed_loop(s.run))
+    un = result.unexplained
+    if un is not None:
+        figs.insert(0, scan_figure(out, un, rotary=rotary))
+        figs.insert(0, floor_figure(out, [st.effect or 'start' for st in result.steps],
+                                    [st.force_nrmse for st in result.steps],
+                                    un.noise_floor_nrmse))
+    return rep.write_html(out, f'fit: {s.kin.name} from {args.model}', text, figs)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -79,6 +99,8 @@ def run(args: argparse.Namespace) -> int:
     data = result.as_dict()
     data['position'] = {'horizon': before.horizon, 'before': before.rms_error,
                         'after': after.rms_error}
+    if args.report:
+        data['report'] = str(_report(args, s, result, '\n'.join(lines)))
     if args.output:
         data['output'] = str(args.output)
     emit(args, jsonable(data), '\n'.join(lines))
