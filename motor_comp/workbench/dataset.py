@@ -27,6 +27,7 @@ import numpy as np
 
 from motor_comp.errors import ParameterError
 from motor_comp.physics.axis import AxisModel
+from motor_comp.physics.effects import EffectKind
 from motor_comp.physics.effects.identification import Column, Signal, Summary
 from motor_comp.workbench import processing as proc
 from motor_comp.workbench.derivatives import InputHold, Kinematics
@@ -137,6 +138,15 @@ class SpeedWeights:
         w = np.asarray(self.w, dtype=float)
         if len(w) != len(self.edges) or not np.all(np.isfinite(w)) or np.any(w <= 0):
             raise ParameterError('speed weights must be finite and positive, one per band')
+
+
+def forces_only(model: AxisModel) -> AxisModel:
+    """Return ``model`` without its input and output effects (the flight across a gap).
+
+    The gap's own motion is being reconstructed and the delayed command is applied by
+    the flight itself, so only the forces stay.
+    """
+    return model.without(*[e.name for e in model.effects if e.kind is not EffectKind.FORCE])
 
 
 def model_signature(model: AxisModel | None) -> str:
@@ -280,7 +290,7 @@ class Dataset:
         """
         width, tau = float(width), float(tau)
         mkey: tuple = (0,) if width <= 0 else (
-            'gap', width, tau, model_signature(model.without('backlash', 'delay')
+            'gap', width, tau, model_signature(forces_only(model)
                                                if model is not None else None))
         key = (mkey, tau, weights)
         v = self._views.get(key)
@@ -302,7 +312,7 @@ class Dataset:
                 out.append(Motion(p, p.kin.position, True))
                 continue
             # the flight sees the logged command delayed by τ at the integrator's sub-step
-            base = (model or self.model).without('backlash', 'delay')
+            base = forces_only(model or self.model)
             xm = motor_position(p.kin, width, base, p.kin.u, tau=tau)
             out.append(Motion(p, xm, False))
         if len(self._motions) > 64:

@@ -61,7 +61,7 @@ from motor_comp.workbench.lsq import bic
 from motor_comp.workbench.result import Estimate, estimate
 from motor_comp.workbench.varpro import cv_candidate, cv_design, search, searched
 from motor_comp.workbench.wording import MASS, REFIT, ROTARY_UNITS, TITLES, ParameterChange, \
-    axis_units, common_scale, directions, fmt_param, model_scalars, scale_forces, \
+    axis_units, common_scale, fmt_param, more_words, model_scalars, scale_forces, \
     significant_changes
 
 #: a candidate that does not pay alone is tried in a pair when it removes at least this
@@ -133,8 +133,7 @@ class CandidateResult:
         else:
             parts = [fmt_param(self.effect, k, v, self.uncertainty.get(k), u)
                      for k, v in self.scalars.items()]
-            if self.effect == 'asymmetry':
-                parts.append(directions(self.model, u))
+            parts.append(more_words(self.effect, self.model, u))
             body = f'{self.title}, {", ".join(p for p in parts if p)}'
         verdict = ''
         if self.supported and self.why_not:

@@ -236,6 +236,11 @@ def directions(model: AxisModel, u: Units) -> str:
             f'fv− {fv - a.dfv / 2:.4g} {u.viscous}')
 
 
+def more_words(effect: str, model: AxisModel, u: Units) -> str:
+    """Return what a finding says besides its parameters ('' for most effects)."""
+    return directions(model, u) if effect == 'asymmetry' else ''
+
+
 def experiment_notes(summary: Any, units: Units) -> list[str]:
     """Return what the experiment lacks for the method to judge (empty when nothing)."""
     notes = []
@@ -258,4 +263,5 @@ def experiment_notes(summary: Any, units: Units) -> list[str]:
 __all__ = ['LINEAR_UNITS', 'MASS', 'ParameterChange', 'REFIT', 'ROTARY_UNITS', 'SEPARATE',
            'TITLES', 'axis_units', 'common_scale', 'directions', 'experiment_notes',
            'fmt_param', 'force_scaled', 'gain_note', 'identifiability_notes',
-           'model_scalars', 'scale_forces', 'significant_changes', 'unit_of']
+           'model_scalars', 'more_words', 'scale_forces', 'significant_changes',
+           'unit_of']

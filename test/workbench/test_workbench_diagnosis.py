@@ -1,0 +1,133 @@
+"""An honest diagnosis on data the workbench did not produce (issue 23 "Must show").
+
+Every case comes from the independent generator (:mod:`indgen_cases`: its own
+integrator, controller and laws, never the project's physics) and is fitted by
+``fit --auto`` from the start a user has (a bare model, the mass off), then judged on
+what the result says it leaves (``unexplained``):
+
+* complete models (in-library effects only): no feature with a share of 10 % or more in
+  at least 95 % of the runs, and the final NRMSE within 1.5× the reported noise floor;
+* effects the library lacks (a friction drift in time, a disturbance at a time
+  frequency, drag, a force bump, a speed dip, a reversal transient): reported as a
+  feature where they act in at least 90 % of the runs;
+* ``load_friction`` and ``position_friction`` from a bare model: ``mu`` within 20 % and
+  the peak of ``dfc`` within 1 cm;
+* pre-sliding on ordinary trajectories (sine tracking, sweeps): found in at least 90 % of
+  the runs that have it and in none of the same axes without it.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from indgen_cases import COMPLETE_CASES, NEW_EFFECT_CASES, ORDINARY_PRESLIDING_CASES, \
+    OUT_OF_LIBRARY_CASES, feature_matches, parameter_errors  # noqa: E402
+from test_workbench_independent import as_model, parallel_map  # noqa: E402
+
+pytestmark = pytest.mark.timeout(1500)
+
+#: run length [s]
+DURATION = 20.0
+#: the issue's bars
+FALSE_ALARM_SHARE = 0.10
+COMPLETE_SHARE = 0.95
+NEAR_FLOOR = 1.5
+REPORTED_SHARE = 0.90
+PRESLIDING_SHARE = 0.90
+#: seeds of each list (none is a seed the method was tuned on: the issue-23 lists are
+#: new, and the suite's families are drawn here with seeds the suite never uses)
+COMPLETE_SEEDS = (21,)
+SEEDS = (1,)
+
+
+def _job(job: tuple[str, int, int]) -> dict[str, Any]:
+    """Generate one case, fit it from its start model, return what the checks need."""
+    from motor_comp.workbench import fit, kinematics
+    from motor_comp.workbench.session import default_hold
+    lists = {'complete': COMPLETE_CASES, 'out': OUT_OF_LIBRARY_CASES,
+             'new': NEW_EFFECT_CASES, 'gms': ORDINARY_PRESLIDING_CASES}
+    name, i, seed = job
+    case = lists[name][i]
+    gen = case.make(seed, duration=DURATION)
+    start = as_model(case.start(gen.truth), source='start')
+    kin = kinematics(gen.run, hold=default_hold(start))
+    res = fit(kin, start, auto=True)
+    un = res.unexplained
+    return {'label': case.label, 'seed': seed, 'truth': gen.truth,
+            'fitted': res.model.to_dict(), 'params': res.params,
+            'features': [f.as_dict() for f in un.features],
+            'nrmse': un.force_nrmse, 'floor': un.noise_floor_nrmse,
+            'planted': gen.planted, 'peak': gen.meta.get('position_friction_peak'),
+            'errors': parameter_errors(gen.truth, res.model.to_dict())}
+
+
+def _run(name: str, cases: Any, seeds: Any) -> list[dict[str, Any]]:
+    return parallel_map(_job, [(name, i, s) for i in range(len(cases)) for s in seeds])
+
+
+@pytest.fixture(scope='module')
+def complete():
+    # the suite's families and the new experiments, in-library effects only
+    return _run('complete', COMPLETE_CASES, COMPLETE_SEEDS)
+
+
+def test_complete_models_invent_no_feature_and_reach_their_floor(complete):
+    quiet = [o for o in complete
+             if not any(f['share'] >= FALSE_ALARM_SHARE for f in o['features'])]
+    near = [o for o in complete if o['nrmse'] <= NEAR_FLOOR * o['floor']]
+    why = [(o['label'], o['seed'], round(o['nrmse'] / o['floor'], 2),
+            [f['text'][:60] for f in o['features']]) for o in complete
+           if o not in quiet or o not in near]
+    assert len(quiet) >= COMPLETE_SHARE * len(complete), why
+    assert len(near) >= COMPLETE_SHARE * len(complete), why
+
+
+def test_effects_the_library_lacks_are_reported_where_they_act():
+    outs = _run('out', OUT_OF_LIBRARY_CASES, SEEDS)
+    hits = [o for o in outs if any(feature_matches(f, p) for p in o['planted']
+                                   for f in o['features'])]
+    missed = [(o['label'], [f['text'][:70] for f in o['features']]) for o in outs
+              if o not in hits]
+    assert len(hits) >= REPORTED_SHARE * len(outs), missed
+
+
+def test_load_and_position_friction_from_a_bare_model():
+    outs = _run('new', NEW_EFFECT_CASES, SEEDS)
+    for o in outs:
+        eff = o['fitted']['effects']
+        if 'load_friction' in o['truth']['effects']:
+            mu = o['truth']['effects']['load_friction']['mu']
+            got = eff.get('load_friction', {}).get('mu')
+            assert got is not None and abs(got / mu - 1.0) <= 0.2, (o['label'], got, mu)
+        if 'position_friction' in o['truth']['effects']:
+            got = o['params'].get('position_friction', {}).get('x_peak')
+            assert got is not None and abs(got - o['peak'][0]) <= 0.01, \
+                (o['label'], got, o['peak'])
+
+
+def test_presliding_is_found_on_ordinary_runs_and_only_where_it_is():
+    outs = _run('gms', ORDINARY_PRESLIDING_CASES, SEEDS)
+    with_gms = [o for o in outs if 'presliding' in o['truth']['effects']]
+    without = [o for o in outs if 'presliding' not in o['truth']['effects']]
+    found = [o for o in with_gms if 'presliding' in o['fitted']['effects']]
+    false = [o['label'] for o in without if 'presliding' in o['fitted']['effects']]
+    assert len(found) >= PRESLIDING_SHARE * len(with_gms), \
+        [o['label'] for o in with_gms if o not in found]
+    assert not false, false
+
+
+def test_the_noise_floor_is_measured_not_assumed(complete):
+    """The floor is finite and positive on every run, and at most a few times the NRMSE.
+
+    A floor far above the model's own NRMSE would excuse anything; one of zero would
+    call every processing artefact a missing effect.
+    """
+    for o in complete:
+        assert math.isfinite(o['floor']) and o['floor'] > 0, o['label']
+        assert o['floor'] <= 4.0 * o['nrmse'] + 1e-4, (o['label'], o['floor'], o['nrmse'])
