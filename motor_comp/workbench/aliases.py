@@ -5,11 +5,12 @@ same force over the positions, speeds and times this run visits — a ripple who
 is longer than the travel is a spring over it (or an offset), a speed dependence is a
 drift in time when the speeds rise over the run, a spring is gravity over a short swing
 (``../shared/IDENTIFICATION.md`` §6).  Judged from the columns, for every term of the
-final model: its fitted force is regressed on the columns of each absent library term —
-at the term's own parameters, and at the values a term declares it can take outside its
-fitting space (:meth:`~motor_comp.physics.effects.identification.Term.aliases`: a ripple
-longer than the travel) — and on a drift in time (a polynomial of time, the usual
-confounder of a time-ordered experiment).  When one of them reproduces it (R² ≥
+final model: the part of its fitted force the rest of the model cannot carry is regressed
+on the columns of each absent library term — at the term's own parameters, and at the
+values a term declares it can take outside its fitting space
+(:meth:`~motor_comp.physics.effects.identification.Term.aliases`: a ripple longer than
+the travel) — and on a drift in time (a polynomial of time, the usual confounder of a
+time-ordered experiment).  When one of them reproduces that part (a share ≥
 :data:`ALIAS_R2`), both are named with the experiment that would separate them, and the
 finding is marked as one of several readings.
 """
@@ -55,11 +56,17 @@ class Alias:
 
 
 def _r2(f: np.ndarray, cols: list[np.ndarray]) -> float:
-    A = np.column_stack([np.ones(len(f))] + cols)
+    A = np.column_stack([np.ones(len(f))] + list(cols))
     G = np.column_stack([A, f])
     th, sse = solve_gram(G.T @ G)
     den = float(np.sum((f - f.mean()) ** 2))
     return 1.0 - sse / den if den > 0 else 0.0
+
+
+def _share(f: np.ndarray, rest: list[np.ndarray], cols: list[np.ndarray]) -> float:
+    """Return the share of ``f`` the model's other columns leave that ``cols`` reproduce."""
+    r0 = _r2(f, rest)
+    return (_r2(f, rest + list(cols)) - r0) / (1.0 - r0) if r0 < 1.0 else 0.0
 
 
 def ambiguities(data: Dataset, est: Any) -> list[Alias]:
@@ -84,6 +91,9 @@ def ambiguities(data: Dataset, est: Any) -> list[Alias]:
         f = X[:, idx] @ th[idx]
         if float(np.sqrt(np.mean((f - f.mean()) ** 2))) < MIN_FORCE * scale:
             continue
+        # what the rest of the model (without the term, its replaced terms back) carries
+        d_rest = design(data, spec.without(n), est.model)
+        rest = list(d_rest.cols)
         readings: list[tuple[str, list[np.ndarray]]] = [('time', drift)]
         for m, t2 in TERMS.items():
             if m in spec.names or t2.applicable(data.summary) is not None:
@@ -97,7 +107,7 @@ def ambiguities(data: Dataset, est: Any) -> list[Alias]:
                     readings.append((m, cols))
         best: dict[str, float] = {}
         for m, cols in readings:
-            r2 = _r2(f, cols)
+            r2 = _share(f, rest, cols)
             if r2 >= ALIAS_R2 and r2 > best.get(m, 0.0):
                 best[m] = r2
         for m, r2 in sorted(best.items(), key=lambda kv: -kv[1]):

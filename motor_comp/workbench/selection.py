@@ -15,7 +15,8 @@
   :data:`~.scan.NEAR_FLOOR` times its floor — where the scan calls it complete unless
   a structure stands.  Its fitted values must lie in the term's declared domain, and
   bounds hold inside the estimator.
-* **Forward** adds the supported candidate with the best held-out BIC; when none pays
+* **Forward** adds the supported candidate with the best held-out BIC — or the first of
+  two simpler ones that together beat a flexible one (:func:`simpler`); when none pays
   alone, two strong ones that pay together are looked for (**look-ahead**); after an
   addition the other terms' nonlinear parameters are searched again (**re-search**) and
   every term whose removal no longer hurts is dropped (**backward**), or replaced by a
@@ -347,7 +348,7 @@ def select(eng: Engine, est: Estimate, step: Step, say: Callable[[str], None],
         scored = [eng.score(est, n) for n in names]
         ok = [c for c in scored if c.supported]
         if ok:
-            best = min(ok, key=lambda c: c.bic_delta)
+            best = simpler(eng, est, min(ok, key=lambda c: c.bic_delta), ok)
         else:
             best = pair(eng, est, scored)
             if best is None:
@@ -365,6 +366,31 @@ def select(eng: Engine, est: Estimate, step: Step, say: Callable[[str], None],
         step(best.effect, 'add', est, '')
         est = backward(eng, est, best.effect, step, removed_once)
     return est
+
+
+def simpler(eng: Engine, est: Estimate, best: CandidateResult,
+            ok: Sequence[CandidateResult]) -> CandidateResult:
+    """Return a simpler candidate when two simpler ones together beat the best (BIC).
+
+    A flexible term (many parameters) can take the shape of two simple ones at once:
+    friction knots along the travel are, on a sine, also a function of the speed, and
+    win a greedy step against a viscous term and a Stribeck curve that the run shows
+    together.  The two strongest supported candidates with fewer parameters are fitted
+    in turn; when together they improve the held-out BIC more than the flexible one
+    alone, the first of them is taken (the second is judged in the next step).
+    """
+    lighter = sorted((c for c in ok if c.n_params < best.n_params),
+                     key=lambda c: c.bic_delta)[:2]
+    if len(lighter) < 2:
+        return best
+    a, b = lighter
+    first = estimate(eng.data_for(a.spec), a.spec, a.model)
+    if b.effect in first.spec.names or b.effect not in candidates(first.spec, eng.data):
+        return best
+    second = eng.score(first, b.effect)
+    if not second.supported:
+        return best
+    return a if a.bic_delta + second.bic_delta < best.bic_delta else best
 
 
 def pair(eng: Engine, est: Estimate, scored: Sequence[CandidateResult]) \
@@ -505,4 +531,4 @@ def backward(eng: Engine, est: Estimate, just: str, step: Step,
 
 
 __all__ = ['CandidateResult', 'Engine', 'PAIR_GAIN', 'backward', 'candidates', 'nested',
-           'pair', 'research', 'select']
+           'pair', 'research', 'select', 'simpler']
