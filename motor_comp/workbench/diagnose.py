@@ -18,6 +18,7 @@ Several runs are one experiment: one model, blocks from every run.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import Any, Sequence
 
@@ -49,7 +50,6 @@ class Diagnosis:
     n_eff: float
     folds: int
     candidates: tuple
-    residual: Residual
     kin: Kinematics
     model: AxisModel
     refit: CandidateResult | None = None
@@ -58,6 +58,11 @@ class Diagnosis:
     units: Units = LINEAR_UNITS
     runs: tuple = ()
     unexplained: Any = None
+
+    @functools.cached_property
+    def residual(self) -> Residual:
+        """The given model's force residual along the first run (for the figures)."""
+        return residual(self.kin, self.model)
 
     @property
     def rotary(self) -> bool:
@@ -198,7 +203,6 @@ def diagnose(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *, folds:
         results.insert(0, refit)
     elif refit.supported:
         results.append(dataclasses.replace(refit, supported=False))
-    res = residual(kins[0], model)
     un = scan(eng.data_for(h0.spec), h0, eng.floor(h0), units=eng.units)
     best = next((c for c in results if c.supported), None)
     corr = best.correlations if best is not None else h0.correlations
@@ -220,7 +224,7 @@ def diagnose(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *, folds:
                      n_samples=sum(len(k) for k in kins),
                      n_sliding=int(sum(np.count_nonzero(m) for m in eng.data.masks)),
                      n_eff=eng.data.n_eff,
-                     folds=folds, candidates=tuple(results), residual=res, kin=kins[0],
+                     folds=folds, candidates=tuple(results), kin=kins[0],
                      model=model, refit=refit, experiment=tuple(exp),
                      identifiability=tuple(ident_notes), units=eng.units,
                      runs=tuple(k.name for k in kins), unexplained=un)

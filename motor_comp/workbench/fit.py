@@ -207,8 +207,6 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
     un = scan(eng.data_for(est.spec), est, eng.floor(est), units=u)
     say(un.summary)
     notes = [a.sentence() for a in ambiguities(eng.data_for(est.spec), est)]
-    for note in notes:
-        say(f'cannot tell apart: {note}')
     return FitResult(steps=tuple(steps), model=final, uncertainty=unc,
                      identifiability=tuple(notes + identifiability_notes(est.correlations)),
                      experiment=tuple(exp), at_bound=dict(est.at_bound),

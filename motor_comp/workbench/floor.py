@@ -93,8 +93,13 @@ def _synthetic(kin: Kinematics, model: AxisModel, length: int, rng: np.random.Ge
                       hold=kin.hold)
 
 
-def noise_floor(data: Dataset, model: AxisModel, *, seed: int = 0) -> Floor:
-    """Return the noise floor of ``model`` on ``data``'s runs (see the module docstring)."""
+def noise_floor(data: Dataset, model: AxisModel, *, seed: int = 0,
+                sensor_share: bool = True) -> Floor:
+    """Return the noise floor of ``model`` on ``data``'s runs (see the module docstring).
+
+    ``sensor_share=False`` leaves out the noise-free twin that splits off the sensor's
+    part (:attr:`Floor.sensor_nrmse` is then NaN): the selection needs the floor only.
+    """
     rng = np.random.default_rng(seed)
     kins, ideal, masks = [], [], []
     for part, mask in zip(data.parts, data.masks):
@@ -102,7 +107,7 @@ def noise_floor(data: Dataset, model: AxisModel, *, seed: int = 0) -> Floor:
         length = max(WINDOW_SMOOTHERS * part.W, 50)
         try:
             syn = _synthetic(kin, model, length, rng, True)
-            clean = _synthetic(kin, model, length, rng, False)
+            clean = _synthetic(kin, model, length, rng, False) if sensor_share else None
         except (FloatingPointError, ValueError):
             return Floor(float('nan'), float('nan'), kin.noise_std(), kin.quantum(), 0)
         m = mask.copy()
@@ -116,14 +121,15 @@ def noise_floor(data: Dataset, model: AxisModel, *, seed: int = 0) -> Floor:
         d_syn = Dataset(kins, model, folds=data.folds, processing=data.processing,
                         masks=masks)
         d_ideal = Dataset(ideal, model, folds=data.folds, processing=data.processing,
-                          masks=masks)
+                          masks=masks) if sensor_share else None
     except ValueError:
         return Floor(float('nan'), float('nan'), 0.0, 0.0, 0)
     per_row = data.den / max(data.n, 1)
     ms = given_sse(d_syn, model) / max(d_syn.n, 1)
-    ms0 = given_sse(d_ideal, model) / max(d_ideal.n, 1)
+    ms0 = given_sse(d_ideal, model) / max(d_ideal.n, 1) if d_ideal is not None else math.nan
     nrmse = math.sqrt(ms / per_row) if per_row > 0 else float('nan')
-    sensor = math.sqrt(max(ms - ms0, 0.0) / per_row) if per_row > 0 else float('nan')
+    sensor = math.sqrt(max(ms - ms0, 0.0) / per_row) if per_row > 0 and math.isfinite(ms0) \
+        else float('nan')
     kin0 = data.kins[0]
     return Floor(nrmse=nrmse, sensor_nrmse=sensor, noise=kin0.noise_std(),
                  quantum=kin0.quantum(), rows=int(d_syn.n), data=d_syn)

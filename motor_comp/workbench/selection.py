@@ -198,6 +198,7 @@ class Engine:
                                  'over the travel at several speeds')
         self.min_gain, self.min_drop = float(min_gain), float(min_drop)
         self._floors: dict = {}
+        self._warm: dict = {}
         #: the given model on the rows it is judged on (the figure ``compare`` reports)
         self.given_data = self.data_for(spec_of(model))
         self.sse_given = given_sse(self.given_data, model)
@@ -232,7 +233,7 @@ class Engine:
         key = (id(D), model_signature(est.model))
         hit = self._floors.get(key)
         if hit is None:
-            f = noise_floor(D, est.model)
+            f = noise_floor(D, est.model, sensor_share=False)
             hit = self._floors[key] = (f.nrmse ** 2 * D.den if math.isfinite(f.nrmse)
                                        else 0.0, f)
         return hit[0]
@@ -279,7 +280,11 @@ class Engine:
         D = self.data_for(base.spec.with_(name, {}))
         sse0 = base.sse_cv if D is self.data_for(base.spec) else \
             cv_design(D, base.spec, base.model)[0]
-        sse, eta = cv_candidate(D, base.spec, name, base.model, screen=0.5 * self.min_gain)
+        # a candidate scored in an earlier round starts from its optimum there
+        sse, eta = cv_candidate(D, base.spec, name, base.model, screen=0.5 * self.min_gain,
+                                start=self._warm.get(name))
+        if eta:
+            self._warm[name] = eta
         spec = base.spec.with_(name, eta)
         est = estimate(D, spec, base.model, cv=False)
         dp = n_params(spec) - n_params(base.spec)

@@ -14,11 +14,12 @@ term and reads only its declarations:
 3. **order**: a term with a structural order (ripple harmonics) takes the count with the
    best information criterion, and is refined again if it changed;
 4. **vector parameters** (the GMS element distances, one element per column): a common
-   scale first, then every element freed, elements whose coefficient ends at its bound
-   or that do not pay for their two parameters (BIC) dropped, a further element grown
-   where the term proposes one and it pays, and each element polished by a scan and
-   Brent.  An element the search pushes onto its lower bound (the sensor's resolution)
-   is not grown: it is no curve the run resolves.
+   scale first (all a screen needs); for a candidate past the screen every element
+   freed, elements whose coefficient ends at its bound or that do not pay for their two
+   parameters (BIC) dropped, a further element grown where the term proposes one and it
+   pays, and each element polished by a scan and Brent.  An element the search pushes
+   onto its lower bound (the sensor's resolution) is not grown: it is no curve the run
+   resolves.
 
 Choices made from data are made inside each validation fold when a held-out score is
 wanted (:func:`cv_candidate`): each fold takes, on its own training rows, the best of
@@ -119,17 +120,22 @@ class Search:
 
     # -- the procedure ---------------------------------------------------------------
     def starts(self, eta0: Mapping) -> list[dict]:
-        """Return the start points: the term's own from the residual, else the grid."""
+        """Return the start points: the term's own from the residual, else the grid.
+
+        A start that already holds every parameter (the term's optimum in the previous
+        round of a selection) joins the grid as one more trial.
+        """
+        warm = [dict(eta0)] if self.space and all(p in eta0 for p in self.space) else []
         vals, r, x = self.base_fit() if self._needs_base() else ({}, None, None)
         eta0 = self.term.derive(eta0, vals) if vals else dict(eta0)
         if r is not None:
             own = self.term.initial(self.data.summary, context(self.spec, self.data), (x, r))
             if own:
-                return [dict(eta0, **e) for e in own]
+                return warm + [dict(eta0, **e) for e in own]
         grids = [(p.name, p.grid) for p in self.space.values() if p.grid]
         if not grids:
-            return [dict(eta0)]
-        out = []
+            return warm or [dict(eta0)]
+        out = list(warm)
         for combo in itertools.product(*[g for _, g in grids]):
             e = dict(eta0)
             for (n, _), v in zip(grids, combo):
@@ -237,9 +243,9 @@ class Search:
                            maxiter=30)
         if opt.fun < f0:
             eta = unpack(opt.x)
-        eta = self._free(self._prune(eta, vp), vp)
+        eta = self._prune(eta, vp)
         if refine:
-            eta = self._polish(self._grow(eta, vp), vp)
+            eta = self._polish(self._grow(self._free(eta, vp), vp), vp)
         return eta
 
     def _levels(self, eta: dict) -> list[float]:
@@ -372,13 +378,18 @@ def search(data: Dataset, spec: Spec, name: str, model: AxisModel | None,
 
 def refine_structure(data: Dataset, spec: Spec, name: str, model: AxisModel | None,
                      rows: np.ndarray | None = None) -> dict:
-    """Grow and polish a vector parameter of ``name`` (a candidate past the screen)."""
+    """Free, grow and polish a vector parameter of ``name`` (a candidate past the screen).
+
+    The screen scores a vector parameter at its family's fit (one common scale); only a
+    candidate that passes it gets the search of every element.
+    """
     s = Search(data, spec, name, model, rows)
     vector = [p for p in s.space.values() if p.vector]
     eta = spec.of(name)
     if not vector:
         return eta
-    return s._polish(s._grow(eta, vector[0]), vector[0])
+    vp = vector[0]
+    return s._polish(s._grow(s._free(eta, vp), vp), vp)
 
 
 def fold_trials(data: Dataset, spec: Spec, name: str, eta_all: Mapping) -> list[dict]:
@@ -455,18 +466,19 @@ def cv_choices(data: Dataset, specs: Sequence[Spec], model: AxisModel | None) ->
 
 
 def cv_candidate(data: Dataset, spec: Spec, name: str, model: AxisModel | None, *,
-                 screen: float = 0.0) -> tuple[float, dict]:
+                 screen: float = 0.0, start: Mapping | None = None) -> tuple[float, dict]:
     """Return the held-out SSE of ``spec`` + ``name`` (η chosen in-fold) and the all-data η.
 
     With ``screen`` > 0, a candidate whose all-data (in-sample) gain is below
     ``screen`` is scored with its nonlinear parameters held at the all-data choice
     (it cannot pay on held-out data anyway, and the in-fold choices are the cost).
+    ``start`` is where the search of the nonlinear parameters starts (default the grid).
     """
     t = TERMS[name]
     if not searched(t):
         return cv_design(data, spec.with_(name), model)[0], {}
     sse0 = vp_sse(data, spec, model) if screen > 0 else math.inf
-    eta_all = search(data, spec.with_(name, {}), name, model,
+    eta_all = search(data, spec.with_(name, dict(start or {})), name, model,
                      stop_above=sse0 * (1.0 - 0.5 * screen), refine=screen <= 0)
     s1 = spec.with_(name, eta_all)
     if screen > 0:
