@@ -77,8 +77,8 @@ class Motion:
                     spread=kin.hold is not InputHold.SAMPLE)
                 # an axis at rest (outside a fitted turn): its friction balances every
                 # other force, whatever the sign of its dither
-                rest = proc.rest_runs(proc.sliding_mask(
-                    kin, None if self._measured else self.position))
+                rest = proc.rest_runs(proc.held_ends(kin, proc.sliding_mask(
+                    kin, None if self._measured else self.position)))
                 rest &= (stuck == 0.0) & ((fwd == 0.0) | (fwd == 1.0)) & \
                     ((bwd == 0.0) | (bwd == 1.0))
                 fwd, bwd = np.where(rest, 0.0, fwd), np.where(rest, 0.0, bwd)

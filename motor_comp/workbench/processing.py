@@ -201,6 +201,22 @@ def sliding_mask(kin: Kinematics, position: np.ndarray | None = None) -> np.ndar
     return m
 
 
+def held_ends(kin: Kinematics, moving: np.ndarray) -> np.ndarray:
+    """Return ``moving`` with the record's untrusted ends set to the nearest trusted sample.
+
+    :func:`sliding_mask` distrusts the filter's transient at both ends; for telling a
+    rest from motion an end is what the axis was doing just inside it (an end taken
+    as a rest put the drive force of the record's last 21 samples into the friction,
+    a 54 N residual on a run that ended sliding).
+    """
+    m = np.array(moving, dtype=bool)
+    w = kin.window
+    if len(m) > 2 * w:
+        m[:w] = m[w]
+        m[-w:] = m[-w - 1]
+    return m
+
+
 def rest_runs(moving: np.ndarray, min_stop: int = 3) -> np.ndarray:
     """Return the samples of runs of at least ``min_stop`` samples not ``moving``."""
     still = ~np.asarray(moving, dtype=bool)
@@ -279,6 +295,6 @@ class Processing:
         return mask
 
 
-__all__ = ['Processing', 'fit_rows_mask', 'gms_position', 'kernel', 'point_position',
+__all__ = ['Processing', 'fit_rows_mask', 'gms_position', 'held_ends', 'kernel', 'point_position',
            'point_velocity', 'short_window', 'sliding_mask', 'smooth_at', 'smooth_full',
            'smoother_length', 'stencil', 'stencil_gain']
