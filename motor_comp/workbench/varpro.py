@@ -345,15 +345,18 @@ class Search:
                     trial = list(d)
                     trial[j] = math.exp(q)
                     return self.cost(with_d(trial))
-                q0 = _to(vp, d[j])
-                grid = [q for q in q0 + steps if lo_q <= q <= hi_q]
+                # an element outside the declared domain (a start beyond it) is
+                # searched from the domain's nearest end
+                q0 = min(max(_to(vp, d[j]), lo_q), hi_q)
+                grid = [q for q in q0 + steps if lo_q <= q <= hi_q] or [q0]
                 vals = [cost(q) for q in grid]
-                qb = grid[int(np.argmin(vals))] if grid else q0
-                opt = minimize_scalar(cost, bounds=(max(qb - h, lo_q), min(qb + h, hi_q)),
-                                      method='bounded', options={'xatol': 1e-4})
-                cand = [(float(opt.fun), float(opt.x))]
-                if grid:
-                    cand.append((float(min(vals)), qb))
+                qb = grid[int(np.argmin(vals))]
+                cand = [(float(min(vals)), qb)]
+                a, b = max(qb - h, lo_q), min(qb + h, hi_q)
+                if b > a:
+                    opt = minimize_scalar(cost, bounds=(a, b), method='bounded',
+                                          options={'xatol': 1e-4})
+                    cand.append((float(opt.fun), float(opt.x)))
                 f, q = min(cand)
                 if f < best * (1.0 - 1e-9):
                     best, d[j], improved = f, math.exp(q), True
