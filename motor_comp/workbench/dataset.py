@@ -21,7 +21,7 @@ import dataclasses
 import hashlib
 import json
 import math
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -125,6 +125,14 @@ class PathView:
     stuck = property(lambda self: self._m.shares[2])
     rest = property(lambda self: self._m.shares[3])
     f_in = property(lambda self: self._f_in(self._m))
+
+    def memo(self, key: tuple, make: Callable[[], Any]) -> Any:
+        """Return ``make()`` computed once per motion and ``key`` (shared derived signals)."""
+        cache = self._m._cache
+        k = ('memo',) + tuple(key)
+        if k not in cache:
+            cache[k] = make()
+        return cache[k]
 
 
 @dataclasses.dataclass(frozen=True)

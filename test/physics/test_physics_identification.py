@@ -148,9 +148,13 @@ def test_gms_columns_times_the_levels_are_the_effects_own_law():
 
     class P:
         xg = x
+
+        @staticmethod
+        def memo(key, make):
+            return make()
     P.dt = dt
     cols = t.columns(eta, ctx)
-    block = cols[0].fn(P)
+    block = np.stack([c.fn(P) for c in cols], axis=1)
     got = block @ np.array([coef[c.label] for c in cols])
     want = gms.force_along(x, dt, fc=fc, fs=18.0, vs=1e-3, delta=1.0)
     assert np.max(np.abs(got - want)) < 1e-9 * np.max(np.abs(want))

@@ -132,6 +132,9 @@ class Path(Protocol):
     dt: float
     direction: int
 
+    def memo(self, key: tuple, make: Callable[[], Any]) -> Any:
+        """Return ``make()`` computed once per path and ``key`` (a signal columns share)."""
+
 
 @dataclasses.dataclass(frozen=True)
 class Context:
