@@ -24,6 +24,7 @@ SCRIPTS = (
     'analysis_scaling.py',
     'workbench.py',
     'workbench_independent.py',
+    'processing_choice.py',
     'reproduce_papers.py',
     'compensation_loop.py',
     'sweep_speed.py',
