@@ -227,9 +227,13 @@ class Engine:
         den = (data or self.data).den
         return math.sqrt(sse / den) if den > 0 else float('inf')
 
-    def floor_sse(self, est: Estimate) -> float:
-        """Return the SSE the noise floor of ``est``'s model leaves on its rows (cached)."""
-        D = self.data_for(est.spec)
+    def floor_sse(self, est: Estimate, data: Dataset | None = None) -> float:
+        """Return the SSE the noise floor of ``est``'s model leaves on its rows (cached).
+
+        ``data``: other rows to judge it on (a candidate's that reach the stops: the
+        floor there is the turns' too).
+        """
+        D = data if data is not None else self.data_for(est.spec)
         key = (id(D), model_signature(est.model))
         hit = self._floors.get(key)
         if hit is None:
@@ -288,7 +292,7 @@ class Engine:
         spec = base.spec.with_(name, eta)
         est = estimate(D, spec, base.model, cv=False)
         dp = n_params(spec) - n_params(base.spec)
-        floor = self.floor_sse(base) * D.den / max(self.data_for(base.spec).den, 1e-300)
+        floor = self.floor_sse(base, D)
         ok, explained, b = self.pays(sse0, sse, dp, D, floor=floor)
         why_not = est.inadmissible.get(name, '')
         if why_not:
@@ -428,8 +432,7 @@ def pair(eng: Engine, est: Estimate, scored: Sequence[CandidateResult]) \
             sse0 = est.sse_cv if D is eng.data_for(est.spec) else \
                 cv_design(D, est.spec, est.model)[0]
             dp = n_params(second.spec) - n_params(est.spec)
-            ok, _, b = eng.pays(sse0, sse, dp, D, floor=eng.floor_sse(est) * D.den
-                                / max(eng.data_for(est.spec).den, 1e-300))
+            ok, _, b = eng.pays(sse0, sse, dp, D, floor=eng.floor_sse(est, D))
             if ok and (best is None or b < best[0]):
                 best = (b, c)
     return None if best is None else best[1]
