@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import TERMS
 from motor_comp.workbench.dataset import Dataset, SpeedWeights
-from motor_comp.workbench.library import Spec, design, encode, n_params
+from motor_comp.workbench.library import Spec, context, design, encode, n_params
 from motor_comp.workbench.lsq import solve_gram
 from motor_comp.workbench.uncertainty import block_sandwich, correlations, jacobian, \
     sandwich, scalars_and_se
@@ -93,7 +93,8 @@ def estimate(data: Dataset, spec: Spec, model: AxisModel, *, cv: bool = True,
     nr = math.sqrt(sse_cv / data.den) if data.den > 0 and np.isfinite(sse_cv) else float('nan')
     why = {}
     for n in spec.names:
-        reason = TERMS[n].admissible(vals, spec.of(n), data.summary)
+        reason = TERMS[n].admissible(vals, spec.of(n), data.summary) or \
+            _unresolved(data, spec, n, se)
         if reason:
             why[n] = reason
         elif n in at_limit:
@@ -103,6 +104,21 @@ def estimate(data: Dataset, spec: Spec, model: AxisModel, *, cv: bool = True,
                     at_bound=at_bound, correlations=corr, sse_cv=sse_cv, sse_fit=jac.sse,
                     n_params=n_params(spec), nrmse_cv=nr, inadmissible=why,
                     at_limit=at_limit)
+
+
+def _unresolved(data: Dataset, spec: Spec, name: str, se: Mapping) -> str:
+    """Return why ``name`` is not resolved: a parameter within 2 SE of what the run resolves."""
+    eta = spec.of(name)
+    for p in TERMS[name].space(data.summary, context(spec, data)):
+        if not p.resolved or p.vector or p.name not in eta:
+            continue
+        v = float(eta[p.name])
+        s = se.get(name, {}).get(p.name, float('nan'))
+        near = v <= p.lo * (1.0 + 1e-6) or (math.isfinite(s) and v - 2.0 * s <= p.lo)
+        if near:
+            return (f'{p.name} {v:.3g} is within two standard errors of the least this run '
+                    f'resolves ({p.lo:.3g})')
+    return ''
 
 
 def replace(est: Estimate, **changes: Any) -> Estimate:

@@ -100,7 +100,7 @@ class BacklashTerm(Term):
         lo = min(lo, 0.25 * hi)
         return (Param('width', lo, hi, grid=tuple(np.logspace(np.log10(lo), np.log10(hi), 8)),
                       log=True, steps=tuple(np.log((0.8, 0.9, 1.0, 1.1, 1.25))),
-                      profile=True),)
+                      profile=True, resolved=True),)
 
     def encode(self, values: Mapping, eta: Mapping, ctx: Context) -> list[Effect]:
         """Return the fitted gap."""

@@ -232,6 +232,10 @@ class Param:
     profile : bool
         Its standard error is (at least) half its profile-likelihood interval: for a
         parameter whose SSE profile is one-sided, which the local curvature understates.
+    resolved : bool
+        ``lo`` is the least value the run resolves (set from the sensor or the
+        sampling): an estimate within two standard errors of it is not evidence of
+        the effect — the data cannot tell it from less than the run can show.
     """
 
     name: str
@@ -242,6 +246,7 @@ class Param:
     steps: tuple = ()
     vector: int = 0
     profile: bool = False
+    resolved: bool = False
 
     def clip(self, v: float) -> float:
         """Return ``v`` within the bounds."""

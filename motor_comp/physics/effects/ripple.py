@@ -207,7 +207,7 @@ class RippleTerm(Term):
     def space(self, s: Summary, ctx: Context) -> tuple[Param, ...]:
         """Return ``period`` [m] (no grid: the start comes from the spectrum)."""
         hi = max(s.travel / 3.0, 2.0 * self._min_period(s))
-        return (Param('period', self._min_period(s), hi),)
+        return (Param('period', self._min_period(s), hi, resolved=True),)
 
     def bracket(self, value: float, s: Summary) -> tuple[float, float]:
         """Return the local search interval around a period: the spectrum's resolution."""
