@@ -281,7 +281,14 @@ class Dataset:
         n_rev = int(sum(np.count_nonzero(np.diff(np.sign(p.kin.v[p.rows])) != 0)
                         for p in self.parts))
         pct = (1, 10, 50, 90, 95)
-        return Summary(dt=max(k.dt for k in self.kins),
+        v = base.gather(lambda p, m: m.v)
+        fwd, bwd = x[v > 0], x[v < 0]
+        shared: tuple = ()
+        if len(fwd) > 1 and len(bwd) > 1:
+            lo = max(np.percentile(fwd, 1), np.percentile(bwd, 1))
+            hi = min(np.percentile(fwd, 99), np.percentile(bwd, 99))
+            shared = (float(lo), float(hi)) if hi > lo else ()
+        return Summary(shared_span=shared, dt=max(k.dt for k in self.kins),
                        duration=min(k.duration for k in self.kins), quantum=kin.quantum(),
                        noise=kin.noise_std(), span=(float(x.min()), float(x.max())),
                        speeds=dict(zip(pct, (float(q) for q in np.percentile(speed, pct)))),

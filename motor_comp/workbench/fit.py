@@ -205,7 +205,6 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
                              f'{model.input_gain:.4g}', REFIT))
         say(steps[-1].summary)
     un = scan(eng.data_for(est.spec), est, eng.floor(est), units=u)
-    say(un.summary)
     notes = [a.sentence() for a in ambiguities(eng.data_for(est.spec), est)]
     return FitResult(steps=tuple(steps), model=final, uncertainty=unc,
                      identifiability=tuple(notes + identifiability_notes(est.correlations)),

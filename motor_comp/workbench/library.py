@@ -204,7 +204,9 @@ def design(data: Dataset, spec: Spec, model: AxisModel | None = None, *,
         cols.append(view.signal(Signal.ACCELERATION))
         labs.append(MASS)
         keys.append(view.key(('signal', Signal.ACCELERATION.value)))
-        bound_cols.append(Column('mass', ('mass',)))
+        # a mass is positive: held inside the estimator, so what is scored is what the
+        # model file can hold (a negative mass was scored and silently not written)
+        bound_cols.append(Column('mass', ('mass',), lo=0.0))
     cols += view.columns([c for _, c in owned], rests=ctx.rests)
     for n, c in owned:
         labs.append((n, c.label))

@@ -50,10 +50,8 @@ def _job(job: tuple[str, int, int]) -> dict[str, Any]:
     """Generate one case, fit it from its start model, return what the checks need."""
     from motor_comp.workbench import fit, kinematics
     from motor_comp.workbench.session import default_hold
-    lists = {'complete': COMPLETE_CASES, 'out': OUT_OF_LIBRARY_CASES,
-             'new': NEW_EFFECT_CASES, 'gms': ORDINARY_PRESLIDING_CASES}
     name, i, seed = job
-    case = lists[name][i]
+    case = LISTS[name][i]
     gen = case.make(seed, duration=DURATION)
     start = as_model(case.start(gen.truth), source='start')
     kin = kinematics(gen.run, hold=default_hold(start))
@@ -67,8 +65,14 @@ def _job(job: tuple[str, int, int]) -> dict[str, Any]:
             'errors': parameter_errors(gen.truth, res.model.to_dict())}
 
 
+LISTS = {'complete': COMPLETE_CASES, 'out': OUT_OF_LIBRARY_CASES, 'new': NEW_EFFECT_CASES,
+         'gms': ORDINARY_PRESLIDING_CASES}
+
+
 def _run(name: str, cases: Any, seeds: Any) -> list[dict[str, Any]]:
-    return parallel_map(_job, [(name, i, s) for i in range(len(cases)) for s in seeds])
+    """Fit ``cases`` (some of list ``name``) with every seed, in parallel."""
+    every = LISTS[name]
+    return parallel_map(_job, [(name, every.index(c), s) for c in cases for s in seeds])
 
 
 @pytest.fixture(scope='module')

@@ -83,6 +83,9 @@ class Summary:
         0 when the runs slide both ways, else the one direction (+1 or −1).
     rotary : bool
         Positions are angles.
+    shared_span : tuple of float
+        The positions crossed in both directions (1st–99th percentile of each
+        direction's fitted positions, intersected) [m or rad]; ``()`` when none is.
     """
 
     dt: float
@@ -95,6 +98,7 @@ class Summary:
     reversals: int
     direction: int
     rotary: bool
+    shared_span: tuple = ()
 
     @property
     def travel(self) -> float:

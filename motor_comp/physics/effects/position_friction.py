@@ -299,6 +299,8 @@ def _numbers(key: str, unit: str, seq: Any) -> tuple[float, ...]:
 
 #: knot counts the identification chooses among (by an information criterion)
 FIT_KNOTS = (4, 24)
+#: least share of the travel crossed in both directions for the run to judge the term
+MIN_SHARED = 0.5
 
 
 def uniform_knots(lo: float, hi: float, n: int) -> tuple[float, ...]:
@@ -337,9 +339,29 @@ class PositionFrictionTerm(Term):
         x = eta['x']
         return dict(eta, x=uniform_knots(x[0], x[-1], order))
 
+    def applicable(self, s: Summary) -> str | None:
+        """Refuse a run that crosses too little of its travel in both directions.
+
+        A friction is told from a force along the travel only by its sign flipping with
+        the motion at the same positions: where each direction covers its own stretch
+        (one-way runs over different ranges) the knot values fit any force there, and a
+        direction dependence (on HSM150's four one-way runs the term stood in for it).
+        """
+        why = super().applicable(s)
+        if why:
+            return why
+        lo, hi = s.shared_span if s.shared_span else (0.0, 0.0)
+        if hi - lo < MIN_SHARED * s.travel:
+            return (f'{self.name} is told from a force along the travel only by motion both '
+                    f'ways over the same positions: the runs cross '
+                    f'{100 * max(hi - lo, 0.0) / max(s.travel, 1e-300):.0f} % of their travel '
+                    f'both ways (at least {100 * MIN_SHARED:.0f} % needed)')
+        return None
+
     def initial(self, s: Summary, ctx: Context, profile: Any) -> list[dict]:
-        """Return eight knots over the travel seen."""
-        return [{'x': uniform_knots(s.span[0], s.span[1], 8)}]
+        """Return eight knots over the travel crossed both ways."""
+        lo, hi = s.shared_span if s.shared_span else s.span
+        return [{'x': uniform_knots(lo, hi, 8)}]
 
     def columns(self, eta: Mapping, ctx: Context) -> list[Column]:
         """Return one column per knot but the first."""
