@@ -47,6 +47,11 @@ RANGES: dict[str, dict[str, tuple[float, float]]] = {
     'asymmetry': {'dfc': (2.0, 6.0), 'dfv': (20.0, 60.0)},
     'delay': {'tau': (0.001, 0.005)},
     'backlash': {'width': (2e-5, 1e-4)},
+    # efficiency losses of a screw or gear: 3–25 % more dry friction per newton driven
+    'load_friction': {'mu': (0.03, 0.25)},
+    # a tight spot: the level rises by `rise` [N] over ±3 cm around `x` (the chirp's
+    # ±50 mm crosses it both ways many times)
+    'position_friction': {'rise': (4.0, 10.0), 'x': (-0.02, 0.02)},
 }
 
 
@@ -109,6 +114,13 @@ def hidden_effect(name: str, rng: np.random.Generator) -> tuple[Any, dict]:
         p = {'tau': _u(rng, r['tau'])}
     elif name == 'backlash':
         p = {'width': _u(rng, r['width'])}
+    elif name == 'load_friction':
+        p = {'mu': _u(rng, r['mu'])}
+    elif name == 'position_friction':
+        xc, rise = _u(rng, r['x']), _u(rng, r['rise'])
+        p = {'x': [xc + d for d in (-0.03, -0.015, 0.0, 0.015, 0.03)],
+             'dfc': [0.0, 0.3 * rise, rise, 0.3 * rise, 0.0]}
+        return make_effect(name, p), {'x_peak': xc, 'rise': rise}
     else:
         raise KeyError(name)
     return make_effect(name, p), dict(p)
@@ -121,6 +133,11 @@ def recovered(model: AxisModel, name: str) -> dict[str, float]:
         return {'stiffness': e.stiffness}
     if name == 'ripple':
         return {'period': e.period, 'amplitude_1': float(e.amplitudes[0])}
+    if name == 'position_friction':
+        lo, hi = e.span
+        grid = np.linspace(lo, hi, 4001)
+        level = e.level(grid)
+        return {'x_peak': float(grid[int(np.argmax(level))]), 'rise': float(np.ptp(level))}
     return e.params()
 
 

@@ -68,7 +68,8 @@ def unit_of(effect: str, key: str, u: Units) -> tuple[str, float]:
         'x0': pos_mm, 'vs': ('mm/s', 1e3) if not u.rotary else ('mrad/s', 1e3),
         'delta': ('', 1.0), 'c': ('1/s', 1.0), 'tau': ('ms', 1e3),
         'width': ('µm', 1e6) if not u.rotary else ('mrad', 1e3), 'q0': ('rad', 1.0),
-        'mass': (u.mass, 1.0), 'period': pos_mm, 'mu': ('', 1.0),
+        'mass': (u.mass, 1.0), 'period': pos_mm, 'mu': ('', 1.0), 'rise': (u.force, 1.0),
+        'x_peak': pos_mm,
     }
     if key.startswith('amplitude_') or key.startswith('dfc_'):
         return u.force, 1.0

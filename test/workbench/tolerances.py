@@ -18,4 +18,5 @@ TOLERANCE = {
     'asymmetry': {'dfc': 0.25, 'dfv': 0.1},
     'backlash': {'width': 0.25},
     'gravity': {'mgl': 0.05},
+    'load_friction': {'mu': 0.2},
 }
