@@ -23,6 +23,7 @@ SCRIPTS = (
     'analysis_speed.py',
     'analysis_scaling.py',
     'workbench.py',
+    'workbench_speed.py',
     'workbench_independent.py',
     'processing_choice.py',
     'reproduce_papers.py',
