@@ -61,8 +61,11 @@ def _n_eff(data: Dataset, rows: np.ndarray | None) -> float:
 
 
 def _nelder_mead(cost: Any, q0: np.ndarray, **options: Any) -> Any:
-    """Nelder–Mead from ``q0`` with scipy's first simplex (5 % of each coordinate), but a
-    coordinate at 0 steps by 0.05 (scipy's 0.00025 would barely move a log-parameter at 1)."""
+    """Run Nelder–Mead from ``q0`` with scipy's first simplex (5 % of each coordinate).
+
+    A coordinate at 0 steps by 0.05 (scipy's 0.00025 would barely move a log-parameter
+    at 1).
+    """
     q0 = np.asarray(q0, dtype=float)
     sim = np.tile(q0, (len(q0) + 1, 1))
     for i in range(len(q0)):

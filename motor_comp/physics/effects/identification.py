@@ -323,7 +323,7 @@ class Term:
         return None
 
     def space(self, s: Summary, ctx: Context) -> tuple[Param, ...]:
-        """Return the nonlinear parameters and their search space (none by default)."""
+        """Return the nonlinear parameters with their bounds and grids; by default none."""
         return ()
 
     def orders(self, s: Summary, eta: Mapping) -> tuple[int, int]:
