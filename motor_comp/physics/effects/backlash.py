@@ -90,7 +90,6 @@ class BacklashTerm(Term):
     excludes = ('presliding',)
     params = ('width',)
     null = ('width', 0.0)
-    shape = ('width', 0.05)
 
     def space(self, s: Summary, ctx: Context) -> tuple[Param, ...]:
         """Return ``width`` [m]."""

@@ -77,7 +77,6 @@ class DelayTerm(Term):
     effect = Delay
     params = ('tau',)
     null = ('tau', 0.0)
-    shape = ('tau', 0.05)
 
     def space(self, s: Summary, ctx: Context) -> tuple[Param, ...]:
         """Return ``tau`` [s]."""

@@ -300,10 +300,6 @@ class Term:
     #: reported scalar that sets the effect's shape and the value at which the effect
     #: vanishes, e.g. ``('tau', 0.0)`` (None: the effect vanishes with its coefficients)
     null: ClassVar[tuple | None] = None
-    #: the reported scalar that sets the effect's shape and the relative standard error
-    #: within which the run pins it down, e.g. ``('tau', 0.05)``: such a term pays on a
-    #: small force share when it removes most of what the model leaves
-    shape: ClassVar[tuple | None] = None
 
     @property
     def kind(self) -> EffectKind:

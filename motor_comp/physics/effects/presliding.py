@@ -428,7 +428,6 @@ class PreslidingTerm(Term):
     #: Σk is set by the first encoder counts after each reversal: looser than a delay's
     #: or a gap's shape (0.19 relative SE on an independent run whose pre-sliding is half
     #: of what a Coulomb + ripple model leaves)
-    shape = ('stiffness', 0.25)
 
     def space(self, s: Summary, ctx: Context) -> tuple[Param, ...]:
         """Return the element distances ``d`` [m] and the attraction ``c`` [1/s]."""
