@@ -28,7 +28,7 @@ from motor_comp.workbench.uncertainty import measurement_spread, processing_spre
     profile_se
 from motor_comp.workbench.varpro import search, searched
 from motor_comp.workbench.wording import MASS, REFIT, common_scale, experiment_notes, \
-    fmt_param, identifiability_notes, model_scalars, scale_forces, significant_changes
+    identifiability_notes, model_scalars, params_text, scale_forces, significant_changes
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,13 +104,6 @@ def _check_add_list(model: AxisModel, names: Sequence[str]) -> None:
             raise ParameterError(f'cannot add {name!r} to this model (add {missing[0]} '
                                  'first)')
         present.add(name)
-
-
-def params_text(est: Estimate, name: str, units: Any) -> str:
-    """Return one effect's fitted parameters with standard errors, in the axis units."""
-    vals = est.scalars.get(name, {})
-    se = est.se.get(name, {})
-    return ', '.join(fmt_param(name, k, v, se.get(k), units) for k, v in vals.items())
 
 
 @single_threaded_blas()

@@ -76,6 +76,16 @@ def unit_of(effect: str, key: str, u: Units) -> tuple[str, float]:
     return table.get(key, ('', 1.0))
 
 
+def params_text(est: Any, name: str, units: Units) -> str:
+    """Return one effect's fitted parameters with standard errors, in the axis units.
+
+    ``est`` is an :class:`~.result.Estimate` (its ``scalars`` and ``se``).
+    """
+    vals = est.scalars.get(name, {})
+    se = est.se.get(name, {})
+    return ', '.join(fmt_param(name, k, v, se.get(k), units) for k, v in vals.items())
+
+
 def fmt_param(effect: str, key: str, value: float, se: float | None, u: Units) -> str:
     """Return ``'fc 10.0 ± 0.1 N'`` in the axis units."""
     unit, k = unit_of(effect, key, u)
@@ -264,5 +274,5 @@ def experiment_notes(summary: Any, units: Units) -> list[str]:
 __all__ = ['LINEAR_UNITS', 'MASS', 'ParameterChange', 'REFIT', 'ROTARY_UNITS', 'SEPARATE',
            'TITLES', 'axis_units', 'common_scale', 'directions', 'experiment_notes',
            'fmt_param', 'force_scaled', 'gain_note', 'identifiability_notes',
-           'model_scalars', 'more_words', 'scale_forces', 'significant_changes',
-           'unit_of']
+           'model_scalars', 'more_words', 'params_text', 'scale_forces',
+           'significant_changes', 'unit_of']
