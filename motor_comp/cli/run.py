@@ -264,6 +264,8 @@ class RunSpec:
     controller: str = 'pid'
     feedforward: str = 'none'
     trajectory: str = ''
+    #: the CSV a ``table`` trajectory plays (its directory becomes the node's model_dir)
+    trajectory_file: str = ''
     timing: str = 'lockstep'
     duration: float = 2.0
     control_rate: float = 1000.0
@@ -277,8 +279,12 @@ class RunSpec:
         """Return the parameters of each node for this run."""
         from motor_comp.control.trajectories import make_trajectory
         traj = self.trajectory or ('p2p' if self.plant == 'pmlm' else 'sine')
+        table = {'file': self.trajectory_file} if traj == 'table' else {}
         # the plant starts at rest on the reference, as the in-process simulator does
-        x0 = make_trajectory(traj).at(0.0).position
+        x0 = make_trajectory(traj, **table).at(0.0).position
+        if table:   # the node reads the file only inside its model_dir
+            table = {'file': str(Path(self.trajectory_file).resolve()),
+                     'model_dir': str(Path(self.trajectory_file).resolve().parent)}
         common = {'timing': self.timing, 'control_rate': float(self.control_rate),
                   'realtime_priority': int(self.realtime_priority)}
         params = {
@@ -288,7 +294,7 @@ class RunSpec:
                            # trajectory, which takes its time origin from it)
                            'expected_subscribers': 3 if self.timing == 'realtime' else 2},
             'trajectory_node': {**common, 'trajectory': traj,
-                                'duration': float(self.duration)},
+                                'duration': float(self.duration), **table},
             'controller_node': {**common, 'plant': self.plant, 'mode': self.controller,
                                 'feedforward': self.feedforward},
             'recorder_node': {'output': str(self.output), 'timing': self.timing},
@@ -377,8 +383,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help='pmlm, ballscrew or a plant YAML file (default pmlm)')
     p.add_argument('--controller', choices=MODES, default='pid')
     p.add_argument('--feedforward', choices=FEEDFORWARDS, default='none')
-    p.add_argument('--trajectory', choices=('sine', 'p2p', 'cv', 'chirp'), default='',
-                   help='default: p2p on the PMLM, sine on the ball-screw')
+    p.add_argument('--trajectory', choices=('sine', 'p2p', 'cv', 'chirp', 'table'),
+                   default='', help='default: p2p on the PMLM, sine on the ball-screw')
+    p.add_argument('--trajectory-file', default='', metavar='F.csv',
+                   help='with --trajectory table: the CSV t, x[, v, a] to play (e.g. from '
+                        'motor-comp excite)')
     p.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep',
                    help='timing mode (default lockstep)')
     p.add_argument('--duration', type=positive_float, default=2.0,
@@ -414,8 +423,11 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f'--rt-priority must be in 0..98, got {prio}')
     from motor_comp.physics.config import load_plant
     load_plant(args.plant)   # a bad plant name/file is a one-line error before any process
+    if bool(args.trajectory_file) != (args.trajectory == 'table'):
+        raise ParameterError('--trajectory table and --trajectory-file F.csv go together')
     spec = RunSpec(output=args.output, plant=args.plant, controller=args.controller,
                    feedforward=args.feedforward, trajectory=args.trajectory,
+                   trajectory_file=args.trajectory_file,
                    timing=args.mode, duration=args.duration, control_rate=args.rate,
                    seed=args.seed, namespace=args.namespace, realtime_priority=prio)
     path = run_nodes(spec, timeout=args.timeout, domain_id=args.domain_id)

@@ -5,7 +5,8 @@ Prints the tracking-error table, or with ``--json`` one object
 …}]}`` (DESIGN.md §6); ``--compensation MODEL.yaml`` adds the model's inverse dynamics
 as a feedforward at the reference state (``--compensation-terms effects``: its effects
 only; ``--compensation-table TABLE.csv`` a position table,
-:mod:`motor_comp.control.compensation`); ``-o RUN.mcap`` records the run
+:mod:`motor_comp.control.compensation`); ``--trajectory table --set traj.file=F.csv``
+plays a CSV ``t, x[, v, a]``; ``-o RUN.mcap`` records the run
 (DESIGN.md §5 topics) with the run parameters as MCAP metadata.  Heavy modules (MCAP
 writer, plots) load lazily so a short command starts fast.
 """
@@ -21,7 +22,7 @@ from motor_comp.cli.common import add_json, check_output_file, jsonable, positiv
 
 CONTROLLERS = ('pid', 'adaptive_sliding', 'npid')
 FEEDFORWARDS = ('none', 'static', 'gms', 'static+gms')
-TRAJECTORIES = ('sine', 'p2p', 'cv', 'chirp')
+TRAJECTORIES = ('sine', 'p2p', 'cv', 'chirp', 'table')
 
 
 def add_scenario_arguments(p: argparse.ArgumentParser, *, plant_required: bool) -> None:

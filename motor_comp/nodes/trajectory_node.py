@@ -31,9 +31,16 @@ only once ``expected_subscribers`` readers (controller + recorder) matched its
 ``reference`` writer, and the plant starts only once it sees that subscription: no
 reader misses reference 0, whatever the order in which DDS discovery completes.
 
-Parameters: ``trajectory`` (``sine | p2p | cv | chirp``) and ``<kind>.<field>`` for
-every field of each trajectory class; changes are validated by building the new
-trajectory (rejected with the reason if invalid) and take effect at the next tick.
+Parameters: ``trajectory`` (``sine | p2p | cv | chirp | table``) and ``<kind>.<field>``
+for every field of each trajectory class; ``file``, the CSV ``t, x[, v, a]`` a
+``table`` plays (DESIGN.md §4).  Changes are validated by building the new trajectory
+(rejected with the reason if invalid) and take effect at the next tick.
+
+``file`` is untrusted input (anyone on the graph may set it): it is read with
+:mod:`motor_comp.param_files` — only inside the read-only ``model_dir`` directories
+(``:``-separated; default the working directory and the package's ``config/``), only a
+regular file under the size bound, never blocking — and a rejection names the rule or
+the row, never the file's content.
 """
 from __future__ import annotations
 
@@ -45,7 +52,10 @@ from typing import Any, Mapping
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from motor_comp.control.trajectories import TRAJECTORIES, Trajectory, make_trajectory
+from motor_comp.control.trajectories import TRAJECTORIES, Table, TableData, Trajectory, \
+    make_trajectory, parse_table
+from motor_comp.errors import ParameterError
+from motor_comp.param_files import parse_dirs, parse_untrusted, read_text
 from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, \
     REALTIME_PRIORITY, Pacer, Param, ParamNode, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, \
     TOPIC_REFERENCE, Timing, period_ns, read_clock_ns, read_joint_state, run_node, \
@@ -61,6 +71,8 @@ def _trajectory_params() -> tuple[Param, ...]:
     """One parameter per field of every trajectory class, named ``<kind>.<field>``."""
     out = []
     for kind, cls in TRAJECTORIES.items():
+        if cls is Table:   # its one parameter is ``file`` (a path, read under model_dir)
+            continue
         for f in dataclasses.fields(cls):
             default = f.default
             default = tuple(float(v) for v in default) if isinstance(default, tuple) \
@@ -93,6 +105,11 @@ PARAMS = (
     Param('batch_period', 0.002, 'Lockstep: take the queued /clock ticks in batches, pausing '
           'this long after each batch (0 = wake for every tick); keep it well below '
           'lookahead control periods of wall time', 's', 0.0, 0.05, read_only=True),
+    Param('file', '', 'Table trajectory: CSV with the columns t, x[, v, a] (SI: s, m, m/s, '
+          'm/s^2; v and a derived when absent) played when trajectory is table; read inside '
+          'model_dir, re-read when set'),
+    Param('model_dir', '', 'Directories the file parameters may name (":"-separated; empty '
+          '= the working directory and the package config/)', read_only=True),
     REALTIME_PRIORITY,
 ) + _trajectory_params()
 
@@ -163,12 +180,31 @@ class TrajectoryNode(ParamNode):
                 raw=True))
             self.mark_hot(self.create_timer(self.dt_ns * 1e-9, self._on_tick))
 
-    @staticmethod
-    def _build(values: Mapping[str, Any]) -> Trajectory:
+    def _build(self, values: Mapping[str, Any]) -> Trajectory:
         kind = values['trajectory']
+        if kind == Table.name:
+            return Table(file=values['file'], data=self._read_table(values['file']))
         prefix = kind + '.'
         params = {k[len(prefix):]: v for k, v in values.items() if k.startswith(prefix)}
         return make_trajectory(kind, **params)
+
+    def _read_table(self, path: str) -> TableData:
+        """Read the table ``file`` names (param_files rules; reasons without content)."""
+        if not path.strip():
+            raise ParameterError('file: the table trajectory needs a file (a CSV t, x[, v, a])')
+        real, text = read_text('file', path, parse_dirs(self.p['model_dir']))
+
+        def parse(body: str) -> TableData | str:
+            # parse_table's reasons name a row or column, never a cell: passed on as
+            # they are; anything else it might raise is reduced by parse_untrusted
+            try:
+                return parse_table(body, source=f'file: {real}')
+            except ParameterError as exc:
+                return str(exc)
+        data = parse_untrusted('file', real, text, parse, what='trajectory table')
+        if isinstance(data, str):
+            raise ParameterError(data)
+        return data
 
     def apply_params(self, changed: Mapping[str, Any], new: Mapping[str, Any]) -> None:
         """Rebuild the trajectory (raises ParameterError with the reason if invalid)."""
