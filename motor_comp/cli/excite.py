@@ -121,9 +121,6 @@ def run(args: argparse.Namespace) -> int:
           f'{d.creep:.3g}–{max(d.speeds):.3g} {units.velocity} (interleaved), '
           f'{counts.get("reversal", 0)} small-reversal bursts, {counts.get("sweep", 0)} '
           f'speed sweeps; loop {d.loop.mode}')
-    if d.stick_slip is not None:
-        print(f'note: the start model stick-slips at {d.stick_slip:.3g} {units.velocity} under '
-              f'this loop; the slowest pass is {d.creep:.3g} {units.velocity}')
     print('predicted standard errors (fit on a simulated run of this excitation):')
     for g, dd in d.predicted_se.items():
         for k, se in dd.items():
