@@ -136,9 +136,12 @@ def test_live_terms_switch_and_table_file_rules(tmp_path, nodes, probe) -> None:
     assert 600 <= k < 59_000
     removed = 123.0 * 0.02
     jump = abs(u[k] - u[k - 1])             # command k is the first without it
-    before = np.median(np.abs(np.diff(u[k - 50:k])))
+    # the level around the switch (5 commands each side: a single derivative spike of a
+    # velocity-count flip, Kd·1 mm/s ≈ 0.23 V, averages out; a switch that is not
+    # bumpless shifts the level by the whole removed feedforward)
+    shift = abs(np.mean(u[k:k + 5]) - np.mean(u[k - 5:k]))
     assert jump < 0.2 * abs(removed), (jump, removed)
-    assert jump < 5.0 * before + 0.05, (jump, before)
+    assert shift < 0.1 * abs(removed), (shift, removed)
 
     # -- the table file: a bad one rejected (row named, content never), rules enforced --
     bad = allowed / 'bad.csv'
