@@ -26,7 +26,12 @@ held over ``[t_k, t_k + T)`` and reaches the axis after the model's dead time ``
 ``r + L·ṙ + ½L²·r̈``, ``ṙ + L·r̈`` (a Taylor step: the reference's jerk is not sent).
 This is the "reference advanced by τ" that a dead time needs (a feedforward cannot be
 delayed less than the plant delays it, only sent earlier); the feedback still sees the
-delay.
+delay.  Measured with the feedforward alone (no feedback) on the PMLM's rigid body,
+20 mm at 1 Hz: 2.5 µm peak error with the T/2 lead, 64 µm without.  (In closed loop
+under the PID the lead-free feedforward tracks the p2p task slightly better, 2.3 vs
+3.3 µm RMS with the true model: the PID's derivative compares ``ṙ`` with a backward
+difference half a period late, an extra ``Kd·T/2·r̈`` that partly stands in for the
+missing lead — the feedback's business, not the model's.)
 
 **Terms the controller law already carries are never counted twice** (the controller
 packs them into ``K_CARRY_*`` from its mode and friction feedforward, see
