@@ -26,6 +26,7 @@ SCRIPTS = (
     'workbench_independent.py',
     'reproduce_papers.py',
     'compensation_loop.py',
+    'excite_prediction.py',
     'sweep_speed.py',
     'ros_loop.py',
     'soak.py',

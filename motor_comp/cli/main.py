@@ -29,6 +29,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     'diagnose',
     'fit',
     'export_table',
+    'excite',
     'study',
 )
 

@@ -60,10 +60,13 @@ Reliability (issue 8):
 * every gain ``<mode>.<field>`` (units and ranges from the control module) is live
   tunable; an invalid value is rejected with the reason and nothing changes;
 * ``compensation_model`` (a model YAML) or ``compensation_table`` (a position table
-  CSV of ``motor-comp export-table``) adds that model's effects as feedforward at the
-  reference state in any mode (:mod:`motor_comp.control.compensation`); set at run time
-  the file is loaded and validated first — a bad file is rejected with the reason and
-  the old compensation stays — and switched in bumplessly (the integrator re-balanced).
+  CSV of ``motor-comp export-table``) adds that model's inverse dynamics (or, with
+  ``compensation_terms: effects``, its effects only) as feedforward at the reference
+  state in any mode, less the terms the law carries itself
+  (:mod:`motor_comp.control.compensation`; the reference acceleration is the reference
+  message's effort); set at run time the file is loaded and validated first — a bad
+  file is rejected with the reason and the old compensation stays — and switched in
+  bumplessly (the integrator re-balanced); ``compensation_terms`` switches alike.
   The files (and a ``plant`` YAML) are read under :mod:`motor_comp.param_files`: only
   inside ``model_dir`` (read-only), only regular files under a size bound, and a
   rejection reason never quotes the file.
@@ -133,6 +136,9 @@ BASE_PARAMS = (
           'set, a bad file is rejected and the old compensation stays'),
     Param('compensation_table', '', 'Position compensation table (CSV of motor-comp '
           'export-table), interpolated (empty = none; exclusive with compensation_model)'),
+    Param('compensation_terms', 'full', 'Terms of compensation_model sent: the full inverse '
+          'dynamics (inertia, back-EMF, damping and effects) or its effects only; switched '
+          'bumplessly', choices=('full', 'effects')),
     Param('expected_subscribers', 2, 'Readers of voltage (plant + recorder) that must have '
           'matched this node\'s writer before it subscribes joint_states, so no reader '
           'misses the first commands (after 10 s it goes on with a warning)', '', 0, 100,
@@ -219,6 +225,7 @@ class ControllerNode(ManagedNode):
                                      feedforward=self.p['feedforward'], **gains)
         comp = load_compensation(self.p, self.file_dirs)   # a bad file fails configure
         if comp is not None:
+            comp = comp.with_terms(self.p['compensation_terms'])
             controller.set_compensation(comp)
             self.get_logger().info(comp.summary())
         self.controller = controller
@@ -597,23 +604,20 @@ class ControllerNode(ManagedNode):
                                      f'effect in the nominal plant {self.cfg.source}')
         comp_changed = bool({'compensation_model', 'compensation_table'} & changed.keys())
         comp = load_compensation(new, self.file_dirs) if comp_changed else ctl.compensation
-        if comp is not None and comp.has_friction and new['feedforward'] != 'none':
-            raise ParameterError(f'{comp.source} compensates friction; with feedforward '
-                                 f'{new["feedforward"]!r} it would be counted twice: set '
-                                 f'feedforward none')
+        if comp is not None:
+            terms = comp.with_terms(new['compensation_terms'])
+            comp_changed = comp_changed or terms is not comp
+            comp = terms
         if self.controller is None:
             return
-        if comp_changed and comp is None:   # off first, then a friction feedforward may go on
-            ctl.set_compensation(None)
         for mode, fields in staged.items():
             ctl.update(mode=mode, **fields)
         if 'mode' in changed:
             ctl.set_mode(new['mode'], keep_estimates=new['keep_estimates'])
         if 'feedforward' in changed:
             ctl.set_feedforward(new['feedforward'])
-        if comp_changed:
-            if comp is not None:
-                ctl.set_compensation(comp)
+        if comp_changed:   # after mode and feedforward: it leaves out what they carry
+            ctl.set_compensation(comp)
             self.get_logger().info(f'{comp.summary() if comp else "compensation off"} '
                                    f'from command {self.steps}')
         if 'stale_timeout' in changed and self._watchdog_timer is not None:

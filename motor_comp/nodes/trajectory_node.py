@@ -31,16 +31,24 @@ only once ``expected_subscribers`` readers (controller + recorder) matched its
 ``reference`` writer, and the plant starts only once it sees that subscription: no
 reader misses reference 0, whatever the order in which DDS discovery completes.
 
-Parameters: ``trajectory`` (``sine | p2p | cv | chirp``) and ``<kind>.<field>`` for
-every field of each trajectory class; changes are validated by building the new
-trajectory (rejected with the reason if invalid) and take effect at the next tick.
+Parameters: ``trajectory`` (``sine | p2p | cv | chirp | table``) and ``<kind>.<field>``
+for every field of each trajectory class; ``file``, the CSV ``t, x[, v, a]`` a
+``table`` plays (DESIGN.md §4).  Changes are validated by building the new trajectory
+(rejected with the reason if invalid) and take effect at the next tick.
+
+``file`` is untrusted input (anyone on the graph may set it): it is read with
+:mod:`motor_comp.param_files` — only inside the read-only ``model_dir`` directories
+(``:``-separated; default the working directory and the package's ``config/``), only a
+regular file under the size bound, never blocking — and a rejection names the rule or
+the row, never the file's content.
 
 Limits (issue 24): ``travel`` [min, max], ``vmax`` and ``amax`` (read-only, the same
 parameters as the controller's; infinite = none).  A trajectory whose reference leaves
 them anywhere on the control grid over ``duration`` (600 s when 0) is refused before it
 is published (:func:`motor_comp.control.limits.check_reference`): at start a one-line
 error and exit status 2, at run time a rejected parameter update (the old trajectory
-goes on) — rather than a trip of the controller mid-run.
+goes on) — rather than a trip of the controller mid-run.  A table is checked the same
+way, on its rows as played.
 """
 from __future__ import annotations
 
@@ -53,11 +61,14 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from motor_comp.control.limits import check_reference
-from motor_comp.control.trajectories import TRAJECTORIES, Trajectory, make_trajectory
-from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, MOTION_LIMITS, \
-    REALTIME_PRIORITY, Pacer, Param, ParamNode, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, \
-    TOPIC_REFERENCE, Timing, limits_from, period_ns, read_clock_ns, read_joint_state, \
-    run_node, set_realtime_priority, set_stamp
+from motor_comp.control.trajectories import TRAJECTORIES, Table, TableData, Trajectory, \
+    make_trajectory, parse_table
+from motor_comp.errors import ParameterError
+from motor_comp.param_files import parse_untrusted, read_text
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, MODEL_DIR, \
+    MOTION_LIMITS, REALTIME_PRIORITY, Pacer, Param, ParamNode, SUB_QOS, TOPIC_CLOCK, \
+    TOPIC_JOINT_STATES, TOPIC_REFERENCE, Timing, limits_from, period_ns, read_clock_ns, \
+    read_joint_state, run_node, set_realtime_priority, set_stamp
 
 #: SI units of the trajectory fields, for the parameter descriptions
 _UNITS = {'amplitude': 'm', 'period': 's', 'offset': 'm', 'distance': 'm', 'move_time': 's',
@@ -69,6 +80,8 @@ def _trajectory_params() -> tuple[Param, ...]:
     """One parameter per field of every trajectory class, named ``<kind>.<field>``."""
     out = []
     for kind, cls in TRAJECTORIES.items():
+        if cls is Table:   # its one parameter is ``file`` (a path, read under model_dir)
+            continue
         for f in dataclasses.fields(cls):
             default = f.default
             default = tuple(float(v) for v in default) if isinstance(default, tuple) \
@@ -101,6 +114,10 @@ PARAMS = (
     Param('batch_period', 0.002, 'Lockstep: take the queued /clock ticks in batches, pausing '
           'this long after each batch (0 = wake for every tick); keep it well below '
           'lookahead control periods of wall time', 's', 0.0, 0.05, read_only=True),
+    Param('file', '', 'Table trajectory: CSV with the columns t, x[, v, a] (SI: s, m, m/s, '
+          'm/s^2; v and a derived when absent) played when trajectory is table; read inside '
+          'model_dir, re-read when set'),
+    MODEL_DIR,
     REALTIME_PRIORITY,
 ) + MOTION_LIMITS + _trajectory_params()
 
@@ -173,9 +190,10 @@ class TrajectoryNode(ParamNode):
                 raw=True))
             self.mark_hot(self.create_timer(self.dt_ns * 1e-9, self._on_tick))
 
-    @staticmethod
-    def _build(values: Mapping[str, Any]) -> Trajectory:
+    def _build(self, values: Mapping[str, Any]) -> Trajectory:
         kind = values['trajectory']
+        if kind == Table.name:
+            return Table(file=values['file'], data=self._read_table(values['file']))
         prefix = kind + '.'
         params = {k[len(prefix):]: v for k, v in values.items() if k.startswith(prefix)}
         return make_trajectory(kind, **params)
@@ -184,6 +202,24 @@ class TrajectoryNode(ParamNode):
         """Refuse a reference beyond the limits (ParameterError naming where)."""
         check_reference(trajectory, self.limits, duration=self.p['duration'],
                         rate=self.p['control_rate'])
+
+    def _read_table(self, path: str) -> TableData:
+        """Read the table ``file`` names (param_files rules; reasons without content)."""
+        if not path.strip():
+            raise ParameterError('file: the table trajectory needs a file (a CSV t, x[, v, a])')
+        real, text = read_text('file', path, self.file_dirs)
+
+        def parse(body: str) -> TableData | str:
+            # parse_table's reasons name a row or column, never a cell: passed on as
+            # they are; anything else it might raise is reduced by parse_untrusted
+            try:
+                return parse_table(body, source=f'file: {real}')
+            except ParameterError as exc:
+                return str(exc)
+        data = parse_untrusted('file', real, text, parse, what='trajectory table')
+        if isinstance(data, str):
+            raise ParameterError(data)
+        return data
 
     def apply_params(self, changed: Mapping[str, Any], new: Mapping[str, Any]) -> None:
         """Rebuild the trajectory (raises ParameterError with the reason if invalid)."""

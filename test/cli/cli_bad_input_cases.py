@@ -438,6 +438,20 @@ CASES: list[Case] = _run_file_cases() + [
        'export-table {d}/model.yaml --points 1 -o {d}/t.csv', ['--points'], subprocess=True),
     _c('study-duration-neg', 'study', '--duration -1', 'study compensate --duration -1',
        ['--duration', '-1'], subprocess=True),
+    # --- excite and table trajectories (issue 24; their full bad-input tests:
+    # test_cli_excite.py, test_control_table_trajectory.py)
+    _c('excite-vmax-zero', 'excite', '--vmax 0',
+       'excite --model {d}/model.yaml --travel -0.05 0.05 --vmax 0 -o {d}/e.csv', ['--vmax'],
+       subprocess=True),
+    _c('excite-travel-period', 'excite', 'travel shorter than two --period',
+       'excite --model {d}/model.yaml --travel 0 0.01 --vmax 0.1 --period 0.02 -o {d}/e.csv',
+       ['travel too short', '--period 0.02']),
+    _c('excite-model-missing', 'excite', 'nonexistent --model',
+       'excite --model {d}/nomodel.yaml --travel 0 0.1 --vmax 0.1 -o {d}/e.csv',
+       ['nomodel.yaml', 'no such model file']),
+    _c('simulate-table-missing', 'simulate', 'table trajectory file missing',
+       'simulate --duration 0.1 --trajectory table --set traj.file={d}/notable.csv',
+       ['notable.csv', 'no such file']),
     # --- the dispatcher
     _c('main-unknown-command', 'main', 'unknown command', 'frobnicate',
        ['frobnicate'], subprocess=True),
