@@ -26,6 +26,13 @@ its grid time, so the controller finds the reference of exactly its measurement'
 and a recording aligns reference and measurement without a hold error (ṙ·T ≈ 150 µm
 at 0.15 m/s when they are stamped at unrelated instants).
 
+End (``exit_at_end``, for a caller that runs one trajectory and waits for its end,
+as ``motor-comp autotune`` does on a drive with its own clock): once the reference of
+trajectory time ``duration`` has been published (realtime: at the grid point
+``duration·rate``, stamped ``t0 + duration``), no later reference is published, every
+reader is given the chance to acknowledge it and the process exits with status 0.  The
+controller then sees no reference and commands 0 V after its ``stale_timeout``.
+
 Start: the node joins the loop (subscribes ``/clock``, or starts its realtime timer)
 only once ``expected_subscribers`` readers (controller + recorder) matched its
 ``reference`` writer, and the plant starts only once it sees that subscription: no
@@ -57,6 +64,7 @@ import dataclasses
 import time
 from typing import Any, Mapping
 
+from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
@@ -108,9 +116,12 @@ PARAMS = (
           '/clock (at most half the loop writers\' history); a parameter change reaches '
           'the loop within this many ticks', 'ticks', 1, LOOP_QOS.depth // 2,
           read_only=True),
-    Param('duration', 0.0, 'Lockstep: run length in sim time; no reference is published '
-          'for a tick past it (0 = no end), so the recording ends with the run', 's', 0.0,
-          1e7, read_only=True),
+    Param('duration', 0.0, 'Run length in trajectory time (0 = no end); lockstep: no '
+          'reference is published for a tick past it, so the recording ends with the run; '
+          'with exit_at_end the node exits after it', 's', 0.0, 1e7, read_only=True),
+    Param('exit_at_end', False, 'Exit (status 0) once the reference of trajectory time '
+          'duration is published and acknowledged (realtime: a caller waits for the end of '
+          'the trajectory; lockstep runs end with the plant\'s duration)', read_only=True),
     Param('batch_period', 0.002, 'Lockstep: take the queued /clock ticks in batches, pausing '
           'this long after each batch (0 = wake for every tick); keep it well below '
           'lookahead control periods of wall time', 's', 0.0, 0.05, read_only=True),
@@ -143,6 +154,9 @@ class TrajectoryNode(ParamNode):
         # n_steps − 1; its command answers it, the reference of tick n_steps closes the run)
         self._last_k = (round(self.p['duration'] * self.p['control_rate'])
                         if self.p['duration'] > 0 else None)
+        # exit_at_end: the last grid point published before the node is done
+        self._end_k = self._last_k if self.p['exit_at_end'] else None
+        self._finished = False
         if self.timing is Timing.LOCKSTEP:
             self.batch_pause = self.p['batch_period']
         self._msg = JointState(name=[JOINT_NAME], position=array.array('d', [0.0]),
@@ -259,6 +273,8 @@ class TrajectoryNode(ParamNode):
         for j in range(max(self._sent_k + 1, k), ahead + 1):
             self._publish_step(j)
         self._sent_k = max(self._sent_k, ahead)
+        if self._end_k is not None and self._sent_k >= self._end_k:
+            self._finished = True
         self._next_k = k + 1   # a later tick advances
 
     def _publish_step(self, k: int) -> None:
@@ -288,9 +304,22 @@ class TrajectoryNode(ParamNode):
         # grid points missed while this process was descheduled are published too (up to
         # CATCH_UP of them): a plant that slipped needs them, and a recording then holds
         # the reference of every sample instead of holding an older one over the gap
-        for k in range(max(self._next_k, k_now - CATCH_UP), k_now + 2):
+        last = k_now + 1 if self._end_k is None else min(k_now + 1, self._end_k)
+        for k in range(max(self._next_k, k_now - CATCH_UP), last + 1):
             self.publish_at(k * (1.0 / self.p['control_rate']), self._t0_ns + k * self.dt_ns)
-        self._next_k = max(self._next_k, k_now + 2)
+        self._next_k = max(self._next_k, last + 1)
+        if self._end_k is not None and self._next_k > self._end_k:
+            self._finished = True
+
+    def finish(self, executor: Any) -> None:
+        """Give the readers the chance to acknowledge the last references (at most 2 s)."""
+        if executor is not None:
+            self.pub.wait_for_all_acked(Duration(seconds=2.0))
+
+    @property
+    def done(self) -> bool:
+        """With ``exit_at_end``: the reference of trajectory time ``duration`` is out."""
+        return self._finished
 
 
 def main(args: list[str] | None = None) -> int:
