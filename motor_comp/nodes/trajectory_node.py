@@ -17,14 +17,21 @@ the node off the loop's critical path, and it may take the ticks in batches
 from the plant and the controller.  A parameter change therefore reaches the loop within
 ``lookahead`` ticks.
 
-Realtime: a wall-clock timer at ``control_rate``; trajectory time starts at the stamp t0
-of the plant's first measurement (the start point r(0), stamped with the wall clock, is held
-until then).  From then on each tick publishes the reference of the plant's sample grid
-``t0 + k·T`` one period ahead (every grid point not yet published up to
-``⌊(now − t0)/T⌋ + 1``, at most ``CATCH_UP`` missed ones after a stall), stamped with
-its grid time, so the controller finds the reference of exactly its measurement's stamp
-and a recording aligns reference and measurement without a hold error (ṙ·T ≈ 150 µm
-at 0.15 m/s when they are stamped at unrelated instants).
+Realtime: a wall-clock timer at ``control_rate``; trajectory time starts when the plant's
+first measurement (stamped t0) arrives, at ``now₀`` on this node's clock (the start point
+r(0), stamped with the wall clock, is held until then).  From then on each tick publishes
+the reference of the plant's sample grid ``t0 + k·T`` one period ahead (every grid point
+not yet published up to ``⌊(now − now₀)/T⌋ + 1``, at most ``CATCH_UP`` missed ones after a
+stall), stamped with its grid time, so the controller finds the reference of exactly
+its measurement's stamp and a recording aligns reference and measurement without a hold
+error (ṙ·T ≈ 150 µm at 0.15 m/s when they are stamped at unrelated instants).  The
+plant's stamps may run on another clock than this node's (a drive on another machine, a
+simulated plant whose sim time slipped behind the wall clock): only their grid is used.
+With ``wait_for_command`` the trajectory time starts only with the first measurement
+after a command was seen on ``voltage`` — the controller answering the held start point:
+a drive publishes its measurements from power-on, before the controller reads them, and
+a stress run of ``motor-comp autotune --external-plant`` lost the first 0.5 s of a table
+that way, the axis standing while the reference moved.
 
 End (``exit_at_end``, for a caller that runs one trajectory and waits for its end,
 as ``motor-comp autotune`` does on a drive with its own clock): once the reference of
@@ -67,6 +74,7 @@ from typing import Any, Mapping
 from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
 
 from motor_comp.control.limits import check_reference
 from motor_comp.control.trajectories import TRAJECTORIES, Table, TableData, Trajectory, \
@@ -75,8 +83,8 @@ from motor_comp.errors import ParameterError
 from motor_comp.param_files import parse_untrusted, read_text
 from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, MODEL_DIR, \
     MOTION_LIMITS, REALTIME_PRIORITY, Pacer, Param, ParamNode, SUB_QOS, TOPIC_CLOCK, \
-    TOPIC_JOINT_STATES, TOPIC_REFERENCE, Timing, limits_from, period_ns, read_clock_ns, \
-    read_joint_state, run_node, set_realtime_priority, set_stamp
+    TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, Timing, limits_from, period_ns, \
+    read_clock_ns, read_joint_state, run_node, set_realtime_priority, set_stamp
 
 #: SI units of the trajectory fields, for the parameter descriptions
 _UNITS = {'amplitude': 'm', 'period': 's', 'offset': 'm', 'distance': 'm', 'move_time': 's',
@@ -119,6 +127,10 @@ PARAMS = (
     Param('duration', 0.0, 'Run length in trajectory time (0 = no end); lockstep: no '
           'reference is published for a tick past it, so the recording ends with the run; '
           'with exit_at_end the node exits after it', 's', 0.0, 1e7, read_only=True),
+    Param('wait_for_command', False, 'Realtime: start the trajectory time with the first '
+          'measurement after a command was seen on voltage (the loop is closed), not with '
+          'the first measurement: a drive measures from power-on, before its controller '
+          'answers (the start point is held until then)', read_only=True),
     Param('exit_at_end', False, 'Exit (status 0) once the reference of trajectory time '
           'duration is published and acknowledged (realtime: a caller waits for the end of '
           'the trajectory; lockstep runs end with the plant\'s duration)', read_only=True),
@@ -167,8 +179,11 @@ class TrajectoryNode(ParamNode):
         # lockstep: never outrun a lagging reader (the recorder) by the writer's history
         self._pub_out = Pacer(self.pub) if self.timing is Timing.LOCKSTEP else self.pub
         self._t0_ns: int | None = None
+        self._t0_rx_ns = 0  # realtime: this process's clock when the first sample arrived
         self._held_ns = 0   # realtime: stamp of the last held start point
         self._js_sub = None   # realtime: the first measurement's reader, until t0
+        self._u_sub = None    # realtime, wait_for_command: the command reader, until t0
+        self._loop_closed = not self.p['wait_for_command']
         # the plant starts when it sees our /clock (lockstep) or joint_states (realtime)
         # reader: create it only once our reference writer matched its readers, so none
         # of them misses reference 0 (a reader that sees our writer may not yet be seen
@@ -202,6 +217,10 @@ class TrajectoryNode(ParamNode):
             self._js_sub = self.mark_hot(self.create_subscription(
                 JointState, TOPIC_JOINT_STATES, self._on_first_measurement, SUB_QOS,
                 raw=True))
+            if self.p['wait_for_command']:
+                # a drive measures from power-on: start when the loop is closed
+                self._u_sub = self.mark_hot(self.create_subscription(
+                    Float64, TOPIC_VOLTAGE, self._on_command, SUB_QOS, raw=True))
             self.mark_hot(self.create_timer(self.dt_ns * 1e-9, self._on_tick))
 
     def _build(self, values: Mapping[str, Any]) -> Trajectory:
@@ -285,8 +304,14 @@ class TrajectoryNode(ParamNode):
     def _on_first_measurement(self, msg: JointState | bytes) -> None:
         # the subscription is dropped by the next tick (not here: the lean loop is
         # still iterating its subscriptions)
-        if self._t0_ns is None:
+        if self._t0_ns is None and self._loop_closed:
             self._t0_ns = read_joint_state(msg)[0]
+            self._t0_rx_ns = self.get_clock().now().nanoseconds
+
+    def _on_command(self, msg: Float64 | bytes) -> None:
+        # the controller answered a measurement (with the held start point): the loop is
+        # closed, the next measurement starts the trajectory
+        self._loop_closed = True
 
     def _on_tick(self) -> None:
         now = self.get_clock().now().nanoseconds
@@ -294,13 +319,21 @@ class TrajectoryNode(ParamNode):
             self.publish_at(0.0, now)
             self._held_ns = now
             return
-        if self._js_sub is not None:
-            self.hot_subscriptions.remove(self._js_sub)
-            self.destroy_subscription(self._js_sub)
-            self._js_sub = None
-        k_now = max(0, (now - self._t0_ns) // self.dt_ns)
-        # stamps only increase: the held start point may be stamped just after t0
-        self._next_k = max(self._next_k, (self._held_ns - self._t0_ns) // self.dt_ns + 1)
+        for sub in (self._js_sub, self._u_sub):
+            if sub is not None:
+                self.hot_subscriptions.remove(sub)
+                self.destroy_subscription(sub)
+        self._js_sub = self._u_sub = None
+        # trajectory time runs on this process's clock from the first sample's arrival: the
+        # plant's stamps may be on another clock (a drive on another machine, a simulated
+        # plant whose sim time slipped behind the wall clock), and counting from its stamp
+        # had started a slipped plant's trajectory seconds in, mid-move (a 29 mm step)
+        k_now = max(0, (now - self._t0_rx_ns) // self.dt_ns)
+        # stamps only increase: the held start point may be stamped just after t0 (on the
+        # same clock; across clocks the held points are on ours, the grid on the plant's)
+        held = self._held_ns - self._t0_ns
+        if 0 <= held <= CATCH_UP * self.dt_ns:
+            self._next_k = max(self._next_k, held // self.dt_ns + 1)
         # grid points missed while this process was descheduled are published too (up to
         # CATCH_UP of them): a plant that slipped needs them, and a recording then holds
         # the reference of every sample instead of holding an older one over the gap

@@ -1,12 +1,13 @@
-"""``trajectory_node`` with ``exit_at_end``: the last reference is trajectory time ``duration``.
+"""``trajectory_node`` with ``exit_at_end`` (and ``wait_for_command``): a caller's end and start.
 
 A caller that plays one trajectory on a drive with its own clock (``motor-comp
 autotune --external-plant``) waits for the trajectory node to exit.  Lockstep: it exits
 with status 0 once the reference of tick ``duration·rate`` is out, and the run still
 completes, every step with its reference.  Realtime: exactly ``duration·rate + 1``
 references on the plant's sample grid after its time origin, the node exits with 0, and
-the controller, seeing no reference any more, commands 0 V.  Waits are on process exits
-and messages.
+the controller, seeing no reference any more, commands 0 V.  With ``wait_for_command``
+the trajectory time starts with a measurement after the controller's first command, not
+with the plant's first sample.  Waits are on process exits and messages.
 """
 from __future__ import annotations
 
@@ -63,12 +64,14 @@ def test_lockstep_exit_at_end_keeps_the_run_whole(tmp_path: Path, nodes) -> None
     assert 'stopping (done)' in nodes.procs['trajectory_node'].log.read_text()
 
 
-def test_realtime_exit_at_end_then_zero_volts(tmp_path: Path, nodes, probe) -> None:
+@pytest.mark.parametrize('wait', [False, True], ids=['first-sample', 'wait-for-command'])
+def test_realtime_exit_at_end_then_zero_volts(tmp_path: Path, nodes, probe, wait) -> None:
     duration = 1.0
     spec = RunSpec(output=tmp_path / 'run.mcap', plant='pmlm', trajectory='sine',
                    timing='realtime', duration=duration)
     # the plant runs on (a drive); the probe reads voltage and joint_states too
-    _start(nodes, tmp_path, spec, {'trajectory_node': {'exit_at_end': True},
+    _start(nodes, tmp_path, spec, {'trajectory_node': {'exit_at_end': True,
+                                                       'wait_for_command': wait},
                                    'plant_node': {'duration': 0.0, 'expected_subscribers': 4},
                                    'controller_node': {'expected_subscribers': 3}})
     assert nodes.wait('trajectory_node', 120) == 0
@@ -87,3 +90,7 @@ def test_realtime_exit_at_end_then_zero_volts(tmp_path: Path, nodes, probe) -> N
     run = read_run(spec.output)
     # its time origin is a measurement's stamp: the grid is the plant's
     assert np.min(np.abs(run.t - t0 * 1e-9)) < 1e-6
+    if wait:
+        # the plant's first sample is answered with the held start point; the trajectory
+        # starts with a later one, promptly (the recorder has every sample from the first)
+        assert run.t[0] < t0 * 1e-9 < run.t[0] + 0.1
