@@ -184,11 +184,13 @@ def gain_params(plant: PlantConfig) -> tuple[Param, ...]:
 class ControllerNode(ManagedNode):
     """Computes one command per measurement with the core controller step.
 
-    Managed node: ``configure`` builds the control law from the parameters and the
-    ``voltage`` publisher; ``activate`` subscribes ``reference`` and ``joint_states``
-    and starts the stale-data watchdog; while not active the node subscribes nothing
-    and so commands nothing (not even the watchdog's 0 V); ``deactivate`` drops a
-    pending measurement; ``cleanup`` drops the law (adaptive estimates included).
+    Managed node: ``configure`` builds the control law from the parameters (and, the
+    first time, the ``voltage`` publisher); ``activate`` subscribes ``reference`` and
+    ``joint_states`` and starts the stale-data watchdog; while not active the node
+    subscribes nothing and so commands nothing (not even the watchdog's 0 V);
+    ``deactivate`` drops a pending measurement; ``cleanup`` drops the law (adaptive
+    estimates included) and keeps the ``voltage`` writer (a drive's reader stays matched
+    to it).
     """
 
     def __init__(self) -> None:
@@ -217,7 +219,7 @@ class ControllerNode(ManagedNode):
         self.autostart()
 
     def configure(self) -> None:
-        """Build the control law (all modes' gains, ready for a switch) and the publisher."""
+        """Build the control law (all modes' gains ready); the first time, the publisher."""
         mode = self.p['mode']
         gains = {k.split('.', 1)[1]: v for k, v in self.p.items()
                  if k.startswith(mode + '.')}
@@ -271,7 +273,8 @@ class ControllerNode(ManagedNode):
                                                   LIMITS_QOS)
         if self.guard is not None:
             self.get_logger().info(f'limits: {self.limits.describe(*self.guard.units)}')
-        self.pub = self.create_publisher(Float64, TOPIC_VOLTAGE, LOOP_QOS)
+        if self.pub is None:   # one writer for the node's life (see cleanup)
+            self.pub = self.create_publisher(Float64, TOPIC_VOLTAGE, LOOP_QOS)
         # lockstep: never outrun a lagging reader (the recorder) by the writer's history;
         # acknowledgements are per writer, so pacing joint_states alone does not bound
         # what this writer may overwrite (a stress run lost 51 commands of 16 337)
@@ -306,11 +309,15 @@ class ControllerNode(ManagedNode):
         self._stale = False
 
     def cleanup(self) -> None:
-        """Drop the law and the publisher (a new configure starts from the parameters)."""
+        """Drop the law (a new configure starts from the parameters); keep the writer.
+
+        The ``voltage`` writer lives as long as the node: a reader matches a new writer
+        only once discovery has told it (2.4 s on a loaded machine), and a drive whose
+        reader had not yet matched held its old command while a reconfigured controller
+        commanded — the axis stood, then jumped at the accumulated command.  An
+        unconfigured or inactive node publishes nothing on it all the same.
+        """
         self.deactivate()
-        if self.pub is not None:
-            self.destroy_publisher(self.pub)
-        self.pub = None
         self.controller = None
 
     def _make_watchdog(self, stale_timeout: float) -> Any:
