@@ -27,6 +27,7 @@ SCRIPTS = (
     'reproduce_papers.py',
     'compensation_loop.py',
     'excite_prediction.py',
+    'autotune.py',
     'sweep_speed.py',
     'ros_loop.py',
     'soak.py',

@@ -30,6 +30,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     'fit',
     'export_table',
     'excite',
+    'autotune',
     'study',
 )
 
