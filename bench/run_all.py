@@ -28,6 +28,8 @@ SCRIPTS = (
     'processing_choice.py',
     'reproduce_papers.py',
     'compensation_loop.py',
+    'excite_prediction.py',
+    'autotune.py',
     'sweep_speed.py',
     'ros_loop.py',
     'soak.py',

@@ -17,7 +17,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: the core packages of DESIGN.md §2 (must exist and import cleanly)
 CORE = ('motor_comp', 'motor_comp.errors', 'motor_comp.physics', 'motor_comp.control',
-        'motor_comp.logs', 'motor_comp.analysis', 'motor_comp.workbench', 'motor_comp.cli')
+        'motor_comp.logs', 'motor_comp.analysis', 'motor_comp.workbench', 'motor_comp.design',
+        'motor_comp.cli')
 #: the ROS adapters, and the CLI subcommands that start nodes: allowed to use rclpy
 ROS_SIDE = ('motor_comp.nodes', 'motor_comp.cli.run', 'motor_comp.cli.replay',
             'motor_comp.cli.demo')

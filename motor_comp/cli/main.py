@@ -29,6 +29,8 @@ SUBCOMMANDS: tuple[str, ...] = (
     'diagnose',
     'fit',
     'export_table',
+    'excite',
+    'autotune',
     'study',
 )
 

@@ -294,6 +294,8 @@ class RunSpec:
     controller: str = 'pid'
     feedforward: str = 'none'
     trajectory: str = ''
+    #: the CSV a ``table`` trajectory plays (its directory becomes the node's model_dir)
+    trajectory_file: str = ''
     timing: str = 'lockstep'
     duration: float = 2.0
     control_rate: float = 1000.0
@@ -312,16 +314,29 @@ class RunSpec:
         """The trajectory this run plays (p2p on the PMLM, sine otherwise, by default)."""
         return self.trajectory or ('p2p' if self.plant == 'pmlm' else 'sine')
 
+    def trajectory_object(self) -> Any:
+        """Return the :class:`~motor_comp.control.trajectories.Trajectory` this run plays.
+
+        A ``table`` is read from :attr:`trajectory_file` (one-line errors naming it).
+        """
+        from motor_comp.control.trajectories import make_trajectory
+        kind = self.trajectory_kind
+        if kind == 'table':
+            return make_trajectory(kind, file=self.trajectory_file)
+        return make_trajectory(kind)
+
     def model_dirs(self) -> list[str]:
         """Return the directories the nodes may read files from (``model_dir``).
 
         The working directory and the package ``config/`` (the nodes' defaults), and
-        the directories of the files this run names (a plant file, the monitor's model).
+        the directories of the files this run names (a plant file, the monitor's model,
+        a table trajectory's CSV).
         """
         from motor_comp.param_files import default_dirs
         dirs = [str(d) for d in default_dirs()]
         for f in (self.plant if self.plant not in ('pmlm', 'ballscrew') else '',
-                  self.monitor):
+                  self.monitor, self.trajectory_file if self.trajectory_kind == 'table'
+                  else ''):
             if f:
                 d = str(Path(f).expanduser().resolve().parent)
                 if d not in dirs:
@@ -330,10 +345,12 @@ class RunSpec:
 
     def node_params(self) -> dict[str, dict[str, Any]]:
         """Return the parameters of each node for this run."""
-        from motor_comp.control.trajectories import make_trajectory
         traj = self.trajectory_kind
         # the plant starts at rest on the reference, as the in-process simulator does
-        x0 = make_trajectory(traj).at(0.0).position
+        x0 = self.trajectory_object().at(0.0).position
+        # a table's file is read by the node inside its model_dir (model_dirs names it)
+        table = ({'file': str(Path(self.trajectory_file).expanduser().resolve())}
+                 if traj == 'table' else {})
         common = {'timing': self.timing, 'control_rate': float(self.control_rate),
                   'realtime_priority': int(self.realtime_priority)}
         files = {'model_dir': os.pathsep.join(self.model_dirs())}
@@ -347,8 +364,8 @@ class RunSpec:
                            # monitor, which pairs every sample with its command)
                            'expected_subscribers': (3 if self.timing == 'realtime' else 2)
                            + monitor},
-            'trajectory_node': {**common, 'trajectory': traj,
-                                'duration': float(self.duration)},
+            'trajectory_node': {**common, **files, 'trajectory': traj,
+                                'duration': float(self.duration), **table},
             'controller_node': {**common, **files, 'plant': self.plant,
                                 'mode': self.controller, 'feedforward': self.feedforward},
             'recorder_node': {**files, 'output': str(self.output), 'timing': self.timing},
@@ -406,13 +423,12 @@ def run_nodes(spec: RunSpec, *, workdir: Path | None = None, timeout: float | No
     the trip case.
     """
     from motor_comp.control.limits import check_reference
-    from motor_comp.control.trajectories import make_trajectory
     require_ros('running the ROS 2 nodes')
     # the recorder would only fail after every node has started: check the path first
     out = check_output_file(spec.output, '-o')
     # a reference beyond the limits is refused before anything starts
-    check_reference(make_trajectory(spec.trajectory_kind), spec.limits,
-                    duration=spec.duration, rate=spec.control_rate)
+    check_reference(spec.trajectory_object(), spec.limits, duration=spec.duration,
+                    rate=spec.control_rate)
     if timeout is None:
         timeout = 60.0 + 20.0 * spec.duration
     # the recorder only creates new files: an existing -o is replaced at the end
@@ -528,8 +544,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help='pmlm, ballscrew or a plant YAML file (default pmlm)')
     p.add_argument('--controller', choices=MODES, default='pid')
     p.add_argument('--feedforward', choices=FEEDFORWARDS, default='none')
-    p.add_argument('--trajectory', choices=('sine', 'p2p', 'cv', 'chirp'), default='',
-                   help='default: p2p on the PMLM, sine on the ball-screw')
+    p.add_argument('--trajectory', choices=('sine', 'p2p', 'cv', 'chirp', 'table'),
+                   default='', help='default: p2p on the PMLM, sine on the ball-screw')
+    p.add_argument('--trajectory-file', default='', metavar='F.csv',
+                   help='with --trajectory table: the CSV t, x[, v, a] to play (e.g. from '
+                        'motor-comp excite)')
     p.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep',
                    help='timing mode (default lockstep)')
     p.add_argument('--duration', type=positive_float, default=2.0,
@@ -584,6 +603,8 @@ def run(args: argparse.Namespace) -> int:
     load_plant(args.plant)   # a bad plant name/file is a one-line error before any process
     if args.monitor:
         AxisModel.load(args.monitor)   # and a bad monitor model
+    if bool(args.trajectory_file) != (args.trajectory == 'table'):
+        raise ParameterError('--trajectory table and --trajectory-file F.csv go together')
     travel = tuple(args.travel) if args.travel else (-math.inf, math.inf)
     if not travel[0] < travel[1]:
         raise ParameterError(f'--travel: expected MIN < MAX, got {travel[0]:g} {travel[1]:g}')
@@ -591,6 +612,7 @@ def run(args: argparse.Namespace) -> int:
                     umax=args.umax or math.inf, max_error=args.max_error or math.inf)
     spec = RunSpec(output=args.output, plant=args.plant, controller=args.controller,
                    feedforward=args.feedforward, trajectory=args.trajectory,
+                   trajectory_file=args.trajectory_file,
                    timing=args.mode, duration=args.duration, control_rate=args.rate,
                    seed=args.seed, namespace=args.namespace, realtime_priority=prio,
                    limits=limits, monitor=args.monitor)

@@ -2,9 +2,11 @@
 
 Prints the tracking-error table, or with ``--json`` one object
 ``{"runs": [{rms_error, max_error, max_glitch, mean_glitch, glitches: [{t, magnitude}],
-…}]}`` (DESIGN.md §6); ``--compensation MODEL.yaml`` adds the model's effects as a
-feedforward at the reference state (``--compensation-table TABLE.csv`` a position
-table, :mod:`motor_comp.control.compensation`); ``-o RUN.mcap`` records the run
+…}]}`` (DESIGN.md §6); ``--compensation MODEL.yaml`` adds the model's inverse dynamics
+as a feedforward at the reference state (``--compensation-terms effects``: its effects
+only; ``--compensation-table TABLE.csv`` a position table,
+:mod:`motor_comp.control.compensation`); ``--trajectory table --set traj.file=F.csv``
+plays a CSV ``t, x[, v, a]``; ``-o RUN.mcap`` records the run
 (DESIGN.md §5 topics) with the run parameters as MCAP metadata.  Heavy modules (MCAP
 writer, plots) load lazily so a short command starts fast.
 """
@@ -20,7 +22,7 @@ from motor_comp.cli.common import add_json, check_output_file, jsonable, positiv
 
 CONTROLLERS = ('pid', 'adaptive_sliding', 'npid')
 FEEDFORWARDS = ('none', 'static', 'gms', 'static+gms')
-TRAJECTORIES = ('sine', 'p2p', 'cv', 'chirp')
+TRAJECTORIES = ('sine', 'p2p', 'cv', 'chirp', 'table')
 
 
 def add_scenario_arguments(p: argparse.ArgumentParser, *, plant_required: bool) -> None:
@@ -59,21 +61,31 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def add_compensation_arguments(p: argparse.ArgumentParser) -> None:
-    """``--compensation MODEL.yaml`` | ``--compensation-table TABLE.csv``."""
+    """``--compensation MODEL.yaml [--compensation-terms T]`` | ``--compensation-table``."""
     g = p.add_mutually_exclusive_group()
     g.add_argument('--compensation', metavar='MODEL.yaml',
-                   help="feedforward of this model file's effects at the reference state "
-                        '(friction, GMS, ripple, offset, spring, gravity) in any controller')
+                   help="feedforward of this model's inverse dynamics at the reference "
+                        '(inertia, back-EMF, damping, friction, GMS, ripple, offset, spring, '
+                        'gravity; the dead time by sending it earlier) in any controller, '
+                        'less the terms the control law carries itself')
     g.add_argument('--compensation-table', metavar='TABLE.csv',
                    help='position-dependent compensation table (motor-comp export-table), '
                         'interpolated')
+    p.add_argument('--compensation-terms', choices=('full', 'effects'), default=None,
+                   help='with --compensation: the full inverse dynamics (default) or the '
+                        "model's effects only")
 
 
 def compensation_from_args(args: argparse.Namespace) -> Any:
     """Load the compensation the options name (None without one); one-line errors."""
     from motor_comp.control import compensation
+    from motor_comp.errors import ParameterError
+    terms = getattr(args, 'compensation_terms', None)
+    if terms is not None and not getattr(args, 'compensation', None):
+        raise ParameterError('--compensation-terms needs --compensation MODEL.yaml (a table '
+                             'holds its position-dependent forces only)')
     if getattr(args, 'compensation', None):
-        return compensation.load_model(args.compensation)
+        return compensation.load_model(args.compensation, terms=terms or 'full')
     if getattr(args, 'compensation_table', None):
         return compensation.load_table(args.compensation_table)
     return None

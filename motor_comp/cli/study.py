@@ -11,8 +11,9 @@ The loop a user runs on a real axis, measured in simulation where the truth is k
    from the *bare* model — the drive's data only (mass, input gain, back-EMF, damping),
    no effect at all;
 3. **compensate**: re-run the same trajectory with the fitted model as compensation
-   (:mod:`motor_comp.control.compensation`), next to the two bounds — no compensation
-   (lower bound) and the compensation from the true plant model (upper bound).
+   (:mod:`motor_comp.control.compensation`: its full inverse dynamics, or with
+   ``--compensation-terms effects`` its effects only), next to the two bounds — no
+   compensation (lower bound) and the same terms of the true plant model (upper bound).
 
 Prints RMS/max error and quadrant glitches of the three runs and the fraction of the
 possible RMS reduction the fitted model recovers,
@@ -77,10 +78,12 @@ class LoopResult:
     recovery_rms: float
     recovery_glitch: float | None
     wall_s: float
+    terms: str = 'full'
 
     def as_dict(self) -> dict[str, Any]:
         """JSON form."""
-        return {'plant': self.plant, 'runs': [dataclasses.asdict(r) for r in self.rows],
+        return {'plant': self.plant, 'compensation_terms': self.terms,
+                'runs': [dataclasses.asdict(r) for r in self.rows],
                 'recovery_rms': self.recovery_rms, 'recovery_glitch': self.recovery_glitch,
                 'fit_steps': list(self.fit_steps), 'fitted_model': self.fitted_model,
                 'wall_s': self.wall_s}
@@ -114,9 +117,13 @@ def _metrics_row(label: str, res: Any) -> LoopRow:
 
 
 def compensation_loop(kind: str, *, duration: float = 20.0, seed: int = 0,
-                      out: Path | None = None,
+                      out: Path | None = None, terms: str = 'full',
                       say: Callable[[str], None] = lambda s: None) -> LoopResult:
-    """Record → ``fit --auto`` from the bare model → compensate, on plant ``kind``."""
+    """Record → ``fit --auto`` from the bare model → compensate, on plant ``kind``.
+
+    ``terms`` (``full | effects``) are the terms of the fitted and of the true model
+    sent as compensation (:class:`~motor_comp.control.compensation.CompensationTerms`).
+    """
     from motor_comp.control import compensation
     from motor_comp.control.controller import make_controller
     from motor_comp.control.simulator import simulate
@@ -153,8 +160,8 @@ def compensation_loop(kind: str, *, duration: float = 20.0, seed: int = 0,
     fitted = result.model
     if out is not None:
         fitted.save(out / f'{kind}_fitted.yaml')
-    comp_fit = compensation.from_model(fitted, source=f'{kind} fitted')
-    comp_true = compensation.from_model(true.model, source=f'{kind} true')
+    comp_fit = compensation.from_model(fitted, source=f'{kind} fitted', terms=terms)
+    comp_true = compensation.from_model(true.model, source=f'{kind} true', terms=terms)
     say(f'{kind}: re-running with the fitted and with the true compensation')
     rows = (_metrics_row('uncompensated', base),
             _metrics_row('fitted compensation', closed_loop(comp_fit)),
@@ -170,14 +177,15 @@ def compensation_loop(kind: str, *, duration: float = 20.0, seed: int = 0,
                   for s in result.steps)
     return LoopResult(plant=kind, rows=rows, fitted_model=fitted.to_dict(), fit_steps=steps,
                       recovery_rms=float(rec), recovery_glitch=rec_g,
-                      wall_s=time.monotonic() - t0)
+                      wall_s=time.monotonic() - t0, terms=terms)
 
 
 def print_loop(res: LoopResult) -> None:
     """Print one plant's table (µm) and the recovery."""
     um = 1e6
     print(f'{res.plant}: effects found by fit --auto from the bare model: '
-          f'{", ".join(s["effect"] for s in res.fit_steps if s["effect"]) or "none"}')
+          f'{", ".join(s["effect"] for s in res.fit_steps if s["effect"]) or "none"}; '
+          f'compensation terms: {res.terms}')
     print(f'  {"run":<26}{"rms [µm]":>10}{"max [µm]":>10}{"max glitch":>12}'
           f'{"mean glitch":>13}')
     for r in res.rows:
@@ -205,6 +213,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument('--duration', type=positive_float, default=20.0, metavar='S',
                    help='recorded (and re-run) time [s] (default 20)')
     c.add_argument('--seed', type=int, default=0, help='measurement-noise seed')
+    c.add_argument('--compensation-terms', choices=('full', 'effects'), default='full',
+                   help='terms of the fitted and the true model sent: the full inverse '
+                        'dynamics (default) or the effects only')
     c.add_argument('--out', type=Path, default=None, metavar='DIR',
                    help='keep the recorded run and the true/fitted models here')
     add_json(c)
@@ -225,7 +236,7 @@ def run(args: argparse.Namespace) -> int:
     say = (lambda s: print(s, file=sys.stderr)) if args.json else \
         (lambda s: print(s, file=sys.stderr, flush=True))
     results = [compensation_loop(k, duration=args.duration, seed=args.seed, out=args.out,
-                                 say=say) for k in plants]
+                                 terms=args.compensation_terms, say=say) for k in plants]
     if args.json:
         print(json.dumps(jsonable({'plants': [r.as_dict() for r in results]})))
         return 0

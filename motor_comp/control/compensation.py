@@ -1,36 +1,88 @@
-"""Model-based compensation: a model file's effects as feedforward at the reference state.
+"""Model-based compensation: a model's inverse dynamics as feedforward at the reference.
 
 A fitted model file (DESIGN.md §6) says which forces the axis fights.  The compensation
 adds them to the command, evaluated at the **reference** state — position ``r``,
-velocity ``ṙ``, and for the GMS pre-sliding elements a state driven by the reference
-displacement, as the friction feedforward of Chiew et al. (Fig. 9) is — so measurement
-noise never enters the feedforward.  In any controller mode the command becomes
+velocity ``ṙ``, acceleration ``r̈``, and for the GMS pre-sliding elements a state
+driven by the reference displacement, as the friction feedforward of Chiew et al.
+(Fig. 9) is — so measurement noise never enters the feedforward.
 
-    ``u = u_feedback + u_ff + F_comp(r, ṙ, z_ref) / input_gain``
+Terms (:class:`CompensationTerms`, DESIGN.md §4):
 
-where ``input_gain`` is the model file's own [N/V] (the force per command unit of the
-drive the model was identified on).  Back-EMF and damping are affine in the velocity
-and independent of the effects, so they do not enter the effect force; they stay the
-feedback's business like the rigid-body dynamics.
+* ``full`` (default): the model's whole inverse dynamics, the force balance of
+  DESIGN.md §3 solved for the drive force at the reference,
+  ``F = M·r̈ + damping·ṙ + Σ F_k(r, ṙ, z_ref)``, sent as the command that produces it
+  through the model's own drive law ``F_in = input_gain·(u − back_emf·ẋ) − damping·ẋ``
+  (:meth:`~motor_comp.physics.axis.AxisModel.input_force`):
+  ``u_ff = F/input_gain + back_emf·ṙ`` — volts for a voltage drive; a current or
+  force drive has ``back_emf = 0`` and the same formula gives amperes or newtons.  On a
+  PID axis the inertia and the back-EMF, not the friction, make most of the tracking
+  error (``bench/reproduce_papers.py``: a nominal inverse model cuts the PMLM's max
+  error to 0.18× of PID's);
+* ``effects``: only ``Σ F_k`` (the effects a model file lists), the behaviour before.
 
-One implementation of each law: the force is evaluated by the effect modules' own
-compiled laws — sliding friction (Coulomb + Stribeck + viscous, and the GMS elements)
-through :func:`~motor_comp.control.feedforward.friction_feedforward`, which calls
+The reference state is taken where the command acts: a command computed at ``t_k`` is
+held over ``[t_k, t_k + T)`` and reaches the axis after the model's dead time ``τ``
+(``delay``), so the state is extrapolated by ``L = T/2 + τ`` along the reference,
+``r + L·ṙ + ½L²·r̈``, ``ṙ + L·r̈`` (a Taylor step: the reference's jerk is not sent).
+This is the "reference advanced by τ" that a dead time needs (a feedforward cannot be
+delayed less than the plant delays it, only sent earlier); the feedback still sees the
+delay.  Measured with the feedforward alone (no feedback) on the PMLM's rigid body,
+20 mm at 1 Hz: 2.5 µm peak error with the T/2 lead, 64 µm without.  (In closed loop
+under the PID the lead-free feedforward tracks the p2p task slightly better, 2.3 vs
+3.3 µm RMS with the true model: the PID's derivative compares ``ṙ`` with a backward
+difference half a period late, an extra ``Kd·T/2·r̈`` that partly stands in for the
+missing lead — the feedback's business, not the model's.)
+
+**Terms the controller law already carries are never counted twice** (the controller
+packs them into ``K_CARRY_*`` from its mode and friction feedforward, see
+:meth:`motor_comp.control.controller.Controller.set_compensation`); the compensation then
+adds the model's force *minus the model's own value of each carried term*:
+
+=====================  ==================================  ==============================
+controller             carries (its own estimate / model)  the compensation adds
+=====================  ==================================  ==============================
+PID, N-PID, ff none    nothing                             everything
+ff ``static``          static curve ``s(ṙ) + fv·ṙ``        GMS − ``s(ṙ)`` (pre-sliding
+                                                           only), position terms, rigid
+ff ``gms``             GMS elements (dry friction)         viscous, position terms, rigid
+ff ``static+gms``      GMS elements + ``fv·ṙ``             position terms, rigid body
+adaptive sliding       ``θ̂1·ẍ_r`` and ``θ̂2·ẋ`` (mass,    dry friction − ``fc·sgn ṙ``
+(Tan eq. 15)           back-EMF and damping), ``fc·sgn    (Stribeck excess, pre-sliding),
+                       ẋ_d``, ``fv·ẋ_d``, ripple          ripple harmonics ≥ 2 (all of
+                       harmonic 1 at its own ω            them when the periods differ),
+                                                           offset, spring, gravity,
+                                                           asymmetry
+=====================  ==================================  ==============================
+
+(The adaptive law's robust term ``k̂·sat(s/φ)`` is a switching bound on the remainder,
+not an estimate of the Stribeck force, so the Stribeck excess stays in the
+compensation; it only leaves the robust term less to cover.  Its first ripple harmonic
+is its own only when the model's period equals the law's within
+:data:`RIPPLE_PERIOD_MATCH`; otherwise the law's regressor cannot represent the model's
+ripple.)
+
+One implementation of each law: the forces are the effect modules' own compiled laws —
+sliding friction (Coulomb + Stribeck + viscous, and the GMS elements) through
+:func:`~motor_comp.control.feedforward.friction_feedforward`, which calls
 :func:`~motor_comp.physics.effects.stribeck.stribeck_curve` and
 :func:`~motor_comp.physics.effects.presliding.gms_step`;
 :func:`~motor_comp.physics.effects.asymmetry.asymmetry_force`,
 :func:`~motor_comp.physics.effects.ripple.ripple_sum`,
 :func:`~motor_comp.physics.effects.gravity.gravity_torque`; the offset and spring laws
-``f0`` and ``k·(x − x0)`` are read exactly as the plant kernel reads them.
+``f0`` and ``k·(x − x0)`` are read exactly as the plant kernel reads them.  The same
+compiled step runs in the in-process simulator and in ``controller_node`` (it is part of
+:func:`~motor_comp.control.controller.controller_step`).
 
 Effects a force feedforward cannot cancel are reported with the reason
-(:data:`NOT_COMPENSABLE`): ``delay`` (a dead time delays the feedforward itself) and
-``backlash`` (a gap in position, not a force).
+(:data:`NOT_COMPENSABLE`): ``backlash`` (a gap in position, not a force).  An effect of
+the vocabulary without a feedforward law here yet (the friction effects
+``load_friction``, ``position_friction``: their level enters :func:`_dry_friction`) is
+reported as not compensated, never dropped silently.
 
 A **position table** (``motor-comp export-table``) holds the position-dependent part
 only — ripple/cogging, gravity, spring, offset — over one period (or revolution) when
 the part is periodic; the controller interpolates it linearly (periodically wrapped, or
-clamped to its ends).
+clamped to its ends).  A table has no mass: its terms are its positions' forces.
 
 Packed layout.  The compensation travels inside the controller's packed vectors so the
 compiled step stays one function: parameters ``Q[qb:]`` (after the controller's own
@@ -61,18 +113,22 @@ from motor_comp.physics.effects.ripple import MAX_HARMONICS, ripple_sum
 
 #: effects a force feedforward cannot cancel, with the reason shown to the user
 NOT_COMPENSABLE: dict[str, str] = {
-    'delay': 'a dead time delays the feedforward by the same time; it needs a predictor '
-             '(e.g. Smith) or a reference advanced by tau, not a force',
     'backlash': 'a dead band is a gap in position between motor and load, not a force; '
                 'a force feedforward cannot close it (it needs a position-domain inverse)',
 }
-#: effects the feedforward cancels
+#: effects the feedforward cancels (``delay`` by sending the feedforward τ earlier)
 COMPENSABLE = ('coulomb', 'viscous', 'stribeck', 'presliding', 'ripple', 'offset',
-               'spring', 'asymmetry', 'gravity')
+               'spring', 'asymmetry', 'gravity', 'delay')
+#: friction effects of the vocabulary that have no feedforward law here yet (the place
+#: for them is :func:`_dry_friction`: both change the dry-friction level)
+NO_LAW_YET = 'no feedforward law for this friction effect yet'
 #: the position-dependent effects a position table holds
 POSITION_EFFECTS = ('ripple', 'gravity', 'spring', 'offset')
-#: friction effects (the controller's own friction feedforward would count them twice)
+#: friction effects (the controller's own friction feedforward carries some of them)
 FRICTION_EFFECTS = ('coulomb', 'viscous', 'stribeck', 'presliding', 'asymmetry')
+#: the adaptive law's first ripple harmonic is the model's when the periods agree this
+#: closely (relative): then over 50 periods of travel the phases part by < 0.16 rad
+RIPPLE_PERIOD_MATCH = 5e-4
 
 
 class CompensationKind(enum.IntEnum):
@@ -80,6 +136,37 @@ class CompensationKind(enum.IntEnum):
 
     MODEL = 1
     TABLE = 2
+
+
+class CompensationTerms(enum.Enum):
+    """Which terms of a model the compensation sends (CLI ``--compensation-terms``).
+
+    ``FULL``: the inverse dynamics ``M·r̈ + damping·ṙ + Σ F_k`` and the back-EMF;
+    ``EFFECTS``: ``Σ F_k`` only.
+    """
+
+    FULL = 'full'
+    EFFECTS = 'effects'
+
+    @classmethod
+    def parse(cls, value: 'str | CompensationTerms') -> 'CompensationTerms':
+        """From ``full | effects`` (or an existing member)."""
+        if isinstance(value, CompensationTerms):
+            return value
+        try:
+            return cls(str(value))
+        except ValueError:
+            raise ParameterError(f'compensation terms must be one of '
+                                 f'{", ".join(t.value for t in cls)}, got {value!r}') from None
+
+
+class CarriedDry(enum.IntEnum):
+    """Dry friction the controller law carries itself (``K_CARRY_DRY``)."""
+
+    NONE = 0
+    COULOMB = 1        # adaptive sliding: fc·sgn(ẋ_d)
+    STATIC = 2         # friction feedforward static: the Stribeck curve s(ṙ)
+    ALL = 3            # friction feedforward with the GMS elements
 
 
 # ---- packed parameters, relative to the block start qb ---------------------------------
@@ -95,13 +182,20 @@ K_RIP_A = K_RIP_PERIOD + 1
 K_RIP_B = K_RIP_A + MAX_HARMONICS
 K_F0 = K_RIP_B + MAX_HARMONICS
 K_SPRING_K, K_SPRING_X0, K_GRAV_MGL, K_GRAV_Q0 = K_F0 + 1, K_F0 + 2, K_F0 + 3, K_F0 + 4
-K_MODEL_SIZE = K_F0 + 5
+# rigid body and drive (full terms): mass [kg], damping [N·s/m], back-EMF [V·s/m]
+K_FULL, K_MASS, K_DAMP, K_BEMF = K_F0 + 5, K_F0 + 6, K_F0 + 7, K_F0 + 8
+K_TAU = K_F0 + 9                  # the model's dead time [s] (the reference is advanced)
+# terms the controller carries (written by the controller from its mode/feedforward)
+K_CARRY_DRY, K_CARRY_VISC, K_CARRY_RIGID, K_CARRY_RIP1 = (K_F0 + 10, K_F0 + 11,
+                                                          K_F0 + 12, K_F0 + 13)
+K_MODEL_SIZE = K_F0 + 14
 # table: n points, period (0 = not periodic), then n positions and n forces
 K_TAB_N, K_TAB_PERIOD, K_TAB_X = 2, 3, 4
 
 # ---- state, relative to the block start cb -----------------------------------------------
 CS_F, CS_U = 0, 1                      # last force [N] and command [V] of the compensation
-CS_GMS_F = 2
+CS_STARTED, CS_RE = 2, 3               # evaluated once; last evaluated position [m]
+CS_GMS_F = 4
 CS_GMS_SLIP = CS_GMS_F + MAX_ELEMENTS
 CS_SIZE = CS_GMS_SLIP + MAX_ELEMENTS
 
@@ -137,8 +231,46 @@ def _table_force(Q, qb, x):
 
 
 @njit(**JIT_INLINE)
-def compensation_force(Q, qb, C, cb, r, rv, dx, dt):
-    """Compensation force [N] at the reference state; GMS elements in ``C`` stepped.
+def _dry_friction(Q, qb, C, cb, rv, dx, dt):
+    """Dry and viscous friction [N] the compensation adds, less what the law carries.
+
+    The model's dry friction is its GMS elements (when it has ``presliding``: they carry
+    the Coulomb + Stribeck level and the pre-sliding hysteresis) or its Stribeck curve
+    ``s(ṙ)``; the viscous part is ``fv·ṙ``.  ``K_CARRY_DRY`` / ``K_CARRY_VISC`` remove
+    the model's own value of the terms the controller carries (module table).  The GMS
+    elements are stepped every call, carried or not, so a switch is bumpless.
+
+    New friction effects change the dry level ``fc`` (and ``fs``) here, before
+    :func:`friction_feedforward` is called: ``load_friction`` by ``mu·|F_in|`` with
+    ``F_in`` the rest of the inverse-dynamics force, ``position_friction`` by
+    ``dfc(r)``.
+    """
+    mode = int(Q[qb + K_FRIC])
+    if mode == 0:
+        return 0.0
+    fc, fs, vs, delta, fv = (Q[qb + K_FC], Q[qb + K_FS], Q[qb + K_VS], Q[qb + K_DELTA],
+                             Q[qb + K_FV])
+    _, f_static, f_el = friction_feedforward(
+        mode, rv, dx, dt, fc, fs, vs, delta, fv, C, cb + CS_GMS_F, cb + CS_GMS_SLIP, Q,
+        qb + K_GMS_ALPHA, qb + K_GMS_K, qb + K_GMS_SIGMA, int(Q[qb + K_GMS_N]),
+        Q[qb + K_GMS_C])
+    curve = f_static - fv * rv            # s(ṙ), the static curve without viscous
+    dry = f_el if int(Q[qb + K_GMS_N]) > 0 else curve
+    carried = int(Q[qb + K_CARRY_DRY])
+    if carried == 1:
+        dry -= fc * np.sign(rv)
+    elif carried == 2:
+        dry -= curve
+    elif carried == 3:
+        dry = 0.0
+    if Q[qb + K_CARRY_VISC] == 0.0:
+        dry += fv * rv
+    return dry
+
+
+@njit(**JIT_INLINE)
+def compensation_force(Q, qb, C, cb, r, rv, ra, dt):
+    """Compensation force [N] at the reference state; its state in ``C`` stepped.
 
     Parameters
     ----------
@@ -146,58 +278,118 @@ def compensation_force(Q, qb, C, cb, r, rv, dx, dt):
         Packed parameters and the start of the compensation block.
     C, cb : ndarray, int
         Controller state and the start of the compensation state (updated in place).
-    r, rv : float
-        Reference position [m] (or [rad]) and velocity [m/s].
-    dx : float
-        Reference displacement since the previous control step [m] (drives the GMS).
+    r, rv, ra : float
+        Reference position [m] (or [rad]), velocity [m/s] and acceleration [m/s²] at
+        the control instant; the model block evaluates them ``T/2 + τ`` later
+        (module docstring), the GMS elements driven by the displacement of that state.
     dt : float
-        Control period [s].
+        Control period T [s].
+
+    Returns
+    -------
+    (force [N], velocity of the evaluated state [m/s]) — the velocity lets
+    :func:`compensation_command` add the back-EMF at the same state.
     """
     kind = int(Q[qb + K_KIND])
-    if kind == 2:
-        return _table_force(Q, qb, r)
-    f = 0.0
-    mode = int(Q[qb + K_FRIC])
-    if mode > 0:
-        f_fric, _, _ = friction_feedforward(
-            mode, rv, dx, dt, Q[qb + K_FC], Q[qb + K_FS], Q[qb + K_VS], Q[qb + K_DELTA],
-            Q[qb + K_FV], C, cb + CS_GMS_F, cb + CS_GMS_SLIP, Q, qb + K_GMS_ALPHA,
-            qb + K_GMS_K, qb + K_GMS_SIGMA, int(Q[qb + K_GMS_N]), Q[qb + K_GMS_C])
-        f += f_fric
+    if kind == 2:   # a table knows no dead time: half the hold period ahead
+        return _table_force(Q, qb, r + 0.5 * dt * rv), rv
+    lead = 0.5 * dt + Q[qb + K_TAU]
+    r = r + lead * (rv + 0.5 * lead * ra)
+    rv = rv + lead * ra
+    dx = r - C[cb + CS_RE] if C[cb + CS_STARTED] > 0.0 else 0.0
+    C[cb + CS_STARTED] = 1.0
+    C[cb + CS_RE] = r
+    f = _dry_friction(Q, qb, C, cb, rv, dx, dt)
     if Q[qb + K_DFC] != 0.0 or Q[qb + K_DFV] != 0.0:
         f += asymmetry_force(rv, Q[qb + K_DFC], Q[qb + K_DFV])
     nh = int(Q[qb + K_RIP_NH])
     if nh > 0:
         f += ripple_sum(r, Q[qb + K_RIP_PERIOD], Q, qb + K_RIP_A, Q, qb + K_RIP_B, nh)
+        if Q[qb + K_CARRY_RIP1] != 0.0:   # the adaptive law's own first harmonic
+            th = 2.0 * np.pi / Q[qb + K_RIP_PERIOD] * r
+            f -= Q[qb + K_RIP_A] * np.sin(th) + Q[qb + K_RIP_B] * np.cos(th)
     f += Q[qb + K_F0] + Q[qb + K_SPRING_K] * (r - Q[qb + K_SPRING_X0])
     if Q[qb + K_GRAV_MGL] != 0.0:
         f += gravity_torque(r, Q[qb + K_GRAV_MGL], Q[qb + K_GRAV_Q0])
-    return f
+    if Q[qb + K_FULL] != 0.0 and Q[qb + K_CARRY_RIGID] == 0.0:
+        f += Q[qb + K_MASS] * ra + Q[qb + K_DAMP] * rv
+    return f, rv
 
 
 @njit(**JIT_INLINE)
-def compensation_command(Q, qb, C, cb, r, rv, dx, dt):
-    """Compensation command [V]: :func:`compensation_force` / the model's input gain.
+def compensation_command(Q, qb, C, cb, r, rv, ra, dt):
+    """Compensation command [V]: the force through the model's drive law.
 
-    Zero when no compensation block follows the controller's parameters
-    (``Q.shape[0] <= qb``).  The force and the command are kept in ``C[cb + CS_F]``,
-    ``C[cb + CS_U]`` for drivers and diagnostics.
+    ``u = F/input_gain + back_emf·ṙ`` (the back-EMF with the full terms, unless the
+    controller carries it).  Zero when no compensation block follows the controller's
+    parameters (``Q.shape[0] <= qb``).  The force and the command are kept in
+    ``C[cb + CS_F]``, ``C[cb + CS_U]`` for drivers and diagnostics.
     """
     if Q.shape[0] <= qb:
         return 0.0
-    f = compensation_force(Q, qb, C, cb, r, rv, dx, dt)
+    f, ve = compensation_force(Q, qb, C, cb, r, rv, ra, dt)
     u = f * Q[qb + K_INVGAIN]
+    if int(Q[qb + K_KIND]) == 1 and Q[qb + K_FULL] != 0.0 and Q[qb + K_CARRY_RIGID] == 0.0:
+        u += Q[qb + K_BEMF] * ve
     C[cb + CS_F] = f
     C[cb + CS_U] = u
     return u
 
 
 @njit(**JIT_OPTIONS)
-def _force_along(Q, C, r, rv, dt, out):
-    """Compensation force along a reference (fresh GMS state at the first sample)."""
+def _force_along(Q, C, r, rv, ra, dt, out_f, out_u):
+    """Compensation force and command along a reference (fresh state at the first sample)."""
     for k in range(r.shape[0]):
-        dx = r[k] - r[k - 1] if k > 0 else 0.0
-        out[k] = compensation_force(Q, 0, C, 0, r[k], rv[k], dx, dt)
+        out_u[k] = compensation_command(Q, 0, C, 0, r[k], rv[k], ra[k], dt)
+        out_f[k] = C[CS_F]
+
+
+@dataclasses.dataclass(frozen=True)
+class Carried:
+    """Terms of a model the controller law carries itself (module table).
+
+    Attributes
+    ----------
+    dry : CarriedDry
+        Dry friction the law carries.
+    viscous : bool
+        Whether it carries ``fv·ṙ``.
+    rigid : bool
+        Whether it carries the inertia, back-EMF and damping (the adaptive law).
+    ripple_first : bool
+        Whether it carries the model's first ripple harmonic.
+    """
+
+    dry: CarriedDry = CarriedDry.NONE
+    viscous: bool = False
+    rigid: bool = False
+    ripple_first: bool = False
+
+    def pack_into(self, K: np.ndarray, qb: int = 0) -> None:
+        """Write the ``K_CARRY_*`` entries of a model block starting at ``qb``."""
+        K[qb + K_CARRY_DRY] = float(self.dry)
+        K[qb + K_CARRY_VISC] = float(self.viscous)
+        K[qb + K_CARRY_RIGID] = float(self.rigid)
+        K[qb + K_CARRY_RIP1] = float(self.ripple_first)
+
+    def names(self, comp: 'Compensation') -> list[str]:
+        """Return the terms of ``comp`` these leave to the controller, in words."""
+        out = []
+        if comp.terms is CompensationTerms.FULL and self.rigid:
+            out.append('inertia, back-EMF and damping')
+        has = set(comp.compensated)
+        dry = {CarriedDry.COULOMB: 'coulomb' if 'coulomb' in has else '',
+               CarriedDry.STATIC: 'sliding friction curve'
+               if has & {'coulomb', 'stribeck', 'presliding'} else '',
+               CarriedDry.ALL: 'dry friction'
+               if has & {'coulomb', 'stribeck', 'presliding'} else ''}.get(self.dry, '')
+        if dry:
+            out.append(dry)
+        if self.viscous and 'viscous' in has:
+            out.append('viscous')
+        if self.ripple_first and 'ripple' in has:
+            out.append('ripple harmonic 1')
+        return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -220,6 +412,10 @@ class Compensation:
         Effects of the model it cannot cancel, with the reason.
     units : Mapping[str, str]
         Position and force units (``m``/``N`` or ``rad``/``N·m``).
+    terms : CompensationTerms
+        Full inverse dynamics or the effects only (a table: its effects).
+    model : AxisModel or None
+        The model it was packed from (None for a table).
     """
 
     kind: CompensationKind
@@ -229,32 +425,82 @@ class Compensation:
     compensated: tuple
     not_compensated: Mapping[str, str]
     units: Mapping[str, str]
+    terms: CompensationTerms = CompensationTerms.EFFECTS
+    model: AxisModel | None = None
 
-    @property
-    def has_friction(self) -> bool:
-        """Whether it cancels friction (then the friction feedforward must be ``none``)."""
-        return any(e in FRICTION_EFFECTS for e in self.compensated)
+    def with_terms(self, terms: 'str | CompensationTerms') -> 'Compensation':
+        """Return the same compensation with other terms (a table keeps its own)."""
+        terms = CompensationTerms.parse(terms)
+        if self.kind is CompensationKind.TABLE or terms is self.terms:
+            return self
+        packed = self.packed.copy()
+        packed[K_FULL] = float(terms is CompensationTerms.FULL)
+        return dataclasses.replace(self, packed=packed, terms=terms)
 
-    def force_along(self, r: np.ndarray, rv: np.ndarray, dt: float) -> np.ndarray:
-        """Force [N] the controller adds along a sampled reference (fresh state)."""
+    def carried_for(self, carried: Carried) -> np.ndarray:
+        """Return the packed block with the controller's carried terms written in."""
+        packed = self.packed.copy()
+        if self.kind is CompensationKind.MODEL:
+            carried.pack_into(packed)
+        return packed
+
+    def force_along(self, r: np.ndarray, rv: np.ndarray, dt: float, *,
+                    ra: np.ndarray | None = None, advance: bool = True,
+                    carried: Carried = Carried()) -> np.ndarray:
+        """Force [N] the controller adds along a sampled reference (fresh state).
+
+        Parameters
+        ----------
+        r, rv : ndarray
+            Reference position [m] and velocity [m/s] at the control instants.
+        dt : float
+            Control period [s].
+        ra : ndarray, optional
+            Reference acceleration [m/s²] (zero when not given).
+        advance : bool
+            Evaluate ``T/2 + τ`` ahead as the controller does (module docstring);
+            False: at the given samples exactly (the effect laws along a path).
+        carried : Carried
+            Terms left to the controller law.
+        """
+        return self._along(r, rv, dt, ra, advance, carried)[0]
+
+    def command_along(self, r: np.ndarray, rv: np.ndarray, dt: float, *,
+                      ra: np.ndarray | None = None,
+                      carried: Carried = Carried()) -> np.ndarray:
+        """Command [V] the controller adds along a sampled reference (fresh state)."""
+        return self._along(r, rv, dt, ra, True, carried)[1]
+
+    def _along(self, r: np.ndarray, rv: np.ndarray, dt: float, ra: np.ndarray | None,
+               advance: bool, carried: Carried) -> tuple[np.ndarray, np.ndarray]:
         r = np.ascontiguousarray(r, dtype=float)
         rv = np.ascontiguousarray(rv, dtype=float)
-        if r.shape != rv.shape:
-            raise ParameterError('reference position and velocity differ in length')
-        out = np.empty(len(r))
-        _force_along(self.packed, np.zeros(CS_SIZE), r, rv, float(dt), out)
-        return out
+        ra = np.zeros_like(r) if ra is None else np.ascontiguousarray(ra, dtype=float)
+        if r.shape != rv.shape or r.shape != ra.shape:
+            raise ParameterError('reference position, velocity and acceleration differ '
+                                 'in length')
+        packed = self.carried_for(carried)
+        if not advance and self.kind is CompensationKind.MODEL:
+            packed[K_TAU] = -0.5 * float(dt)     # lead T/2 + τ = 0
+        elif not advance:                        # a table's force depends on r alone
+            rv = np.zeros_like(r)
+        out_f, out_u = np.empty(len(r)), np.empty(len(r))
+        _force_along(packed, np.zeros(CS_SIZE), r, rv, ra, float(dt), out_f, out_u)
+        return out_f, out_u
 
     def describe(self) -> dict[str, Any]:
         """Plain-value summary (node logs, run metadata, JSON)."""
         return {'compensation': self.source, 'compensation_kind': self.kind.name.lower(),
+                'compensation_terms': self.terms.value,
                 'compensated': list(self.compensated),
                 'not_compensated': dict(self.not_compensated)}
 
     def summary(self) -> str:
         """One line: what is compensated and what is not (and why)."""
-        text = (f'compensation from {self.source}: '
-                f'{", ".join(self.compensated) or "nothing"}')
+        what = ', '.join(self.compensated) or 'nothing'
+        if self.kind is CompensationKind.MODEL and self.terms is CompensationTerms.FULL:
+            what = f'inertia, back-EMF, damping, {what}'
+        text = f'compensation from {self.source} ({self.terms.value}): {what}'
         for name, why in self.not_compensated.items():
             text += f'; {name} not compensated ({why})'
         return text
@@ -265,8 +511,20 @@ def _units(model: AxisModel) -> dict[str, str]:
     return {'position': u.position, 'force': u.force}
 
 
-def from_model(model: AxisModel, *, source: str = 'model') -> Compensation:
-    """Pack the compensable effects of ``model`` (see module docstring)."""
+def from_model(model: AxisModel, *, source: str = 'model',
+               terms: 'str | CompensationTerms' = CompensationTerms.FULL) -> Compensation:
+    """Pack ``model`` for the controller: its inverse dynamics or its effects (module doc).
+
+    Parameters
+    ----------
+    model : AxisModel
+        The (fitted) model.
+    source : str
+        Where it came from (reports).
+    terms : {'full', 'effects'}
+        The whole inverse dynamics (default) or ``Σ F_k`` only.
+    """
+    terms = CompensationTerms.parse(terms)
     K = np.zeros(K_MODEL_SIZE)
     K[K_KIND] = float(CompensationKind.MODEL)
     K[K_INVGAIN] = 1.0 / model.input_gain
@@ -300,18 +558,24 @@ def from_model(model: AxisModel, *, source: str = 'model') -> Compensation:
     grav = model.get('gravity')
     if grav is not None:
         K[K_GRAV_MGL], K[K_GRAV_Q0] = grav.mgl, grav.q0
+    K[K_FULL] = float(terms is CompensationTerms.FULL)
+    K[K_MASS], K[K_DAMP], K[K_BEMF] = model.mass, model.damping, model.back_emf
+    dly = model.get('delay')
+    K[K_TAU] = dly.tau if dly is not None else 0.0
+    not_comp = {n: NOT_COMPENSABLE.get(n, NO_LAW_YET) for n in names
+                if n not in COMPENSABLE}
     return Compensation(kind=CompensationKind.MODEL, source=source, packed=K,
                         input_gain=float(model.input_gain),
                         compensated=tuple(n for n in names if n in COMPENSABLE),
-                        not_compensated={n: NOT_COMPENSABLE[n] for n in names
-                                         if n in NOT_COMPENSABLE},
-                        units=_units(model))
+                        not_compensated=not_comp, units=_units(model), terms=terms,
+                        model=model)
 
 
-def load_model(path: str | Path) -> Compensation:
+def load_model(path: str | Path, *,
+               terms: 'str | CompensationTerms' = CompensationTerms.FULL) -> Compensation:
     """Compensation from a model YAML file (one-line :class:`ModelFileError` if bad)."""
     model = AxisModel.load(path)
-    return from_model(model, source=str(path))
+    return from_model(model, source=str(path), terms=terms)
 
 
 # ---- position tables -------------------------------------------------------------------
@@ -555,8 +819,9 @@ def load(path: str | Path) -> Compensation:
     return load_model(path)
 
 
-__all__ = ['COMPENSABLE', 'NOT_COMPENSABLE', 'POSITION_EFFECTS', 'Compensation',
-           'CompensationKind', 'PositionTable', 'compensation_command',
-           'compensation_force', 'from_model', 'from_table', 'load', 'load_model',
-           'load_table', 'position_table', 'read_table', 'table_from_text', 'table_period',
+__all__ = ['COMPENSABLE', 'NOT_COMPENSABLE', 'POSITION_EFFECTS', 'Carried', 'CarriedDry',
+           'Compensation', 'CompensationKind', 'CompensationTerms', 'PositionTable',
+           'compensation_command', 'compensation_force', 'from_model', 'from_table', 'load',
+           'load_model', 'load_table', 'position_table', 'read_table', 'table_from_text',
+           'table_period',
            'write_table']

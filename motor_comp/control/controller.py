@@ -13,6 +13,8 @@ Per step, at control period ``T`` (``e = r − y`` [m]):
    with the robust modifications of :mod:`.adaptive_sliding`: balance condition, dead
    zones, frozen at rest, σ-leakage; their settings are packed at ``Q_EPS_TH…Q_TH0``);
 3. friction feedforward from the reference (Chiew Fig. 9), force / nominal input gain;
+   model-based compensation (:mod:`.compensation`: a model's inverse dynamics at the
+   reference, without the terms this law carries itself);
 4. saturation ±u_max; conditional-integration anti-windup.
 """
 from __future__ import annotations
@@ -27,8 +29,8 @@ from numba import njit
 from motor_comp.control._jitcache import JIT_INLINE
 from motor_comp.control.adaptive_sliding import ESTIMATES, N_THETA, AdaptiveParams, \
     Robustness, adaptive_output, estimates_in_units, nominal_theta, projection_box, robustness
-from motor_comp.control.compensation import CS_F, CS_SIZE, CS_U, Compensation, \
-    compensation_command
+from motor_comp.control.compensation import CS_F, CS_SIZE, RIPPLE_PERIOD_MATCH, Carried, \
+    CarriedDry, Compensation, CompensationKind, compensation_command
 from motor_comp.control.feedforward import Feedforward, friction_feedforward
 from motor_comp.control.npid import NPIDParams, npid_gain, popov_limit, sampled_loop
 from motor_comp.control.params import ParamsBase
@@ -149,7 +151,7 @@ def controller_step(Q, C, r, rv, ra, y, vy, dt):
     C[C_FSTAT] = f_static
     C[C_FGMS] = f_gms
     # model-based compensation (a block after Q_SIZE / C_SIZE, when one is loaded)
-    u_ff = f_ff / Q[Q_GAIN] + compensation_command(Q, Q_SIZE, C, C_SIZE, r, rv, dx, dt)
+    u_ff = f_ff / Q[Q_GAIN] + compensation_command(Q, Q_SIZE, C, C_SIZE, r, rv, ra, dt)
     u_fb, s = feedback(Q, C, e, ed, integ, ra, rv, y, dt, Q[Q_ADAPT] > 0.5)
     C[C_S] = s
     C[C_RAL] = ra
@@ -233,6 +235,30 @@ class Controller:
             Q[Q_GMS_K:Q_GMS_K + n] = self._gms.k
             Q[Q_GMS_SIGMA:Q_GMS_SIGMA + n] = self._gms.sigma
         self.packed[:Q_SIZE] = Q
+        if self._comp is not None:   # the terms this law now carries itself
+            self.packed[Q_SIZE:] = self._comp.carried_for(self.carried)
+
+    @property
+    def carried(self) -> Carried:
+        """Terms of a compensation model this law carries itself (never added twice).
+
+        The friction feedforward carries its static curve and/or GMS elements (and
+        ``fv·ṙ`` with ``static``); the adaptive law its inertial, back-EMF/damping,
+        Coulomb and viscous estimates, and the first ripple harmonic when the model's
+        ripple period is the law's (:mod:`.compensation`, module table).
+        """
+        ff = self._ff
+        dry = CarriedDry.ALL if ff & Feedforward.GMS else \
+            CarriedDry.STATIC if ff & Feedforward.STATIC else CarriedDry.NONE
+        viscous = bool(ff & Feedforward.STATIC)
+        if self._mode is not ControlMode.ADAPTIVE_SLIDING:
+            return Carried(dry=dry, viscous=viscous)
+        rip = self._comp.model.get('ripple') if self._comp is not None \
+            and self._comp.model is not None else None
+        law_period = 2.0 * math.pi / self.packed[Q_OMEGA]
+        return Carried(dry=max(dry, CarriedDry.COULOMB), viscous=True, rigid=True,
+                       ripple_first=rip is not None
+                       and abs(rip.period / law_period - 1.0) < RIPPLE_PERIOD_MATCH)
 
     @property
     def robustness(self) -> Robustness:
@@ -304,6 +330,31 @@ class Controller:
                                 C[C_YL], C[C_DTL], False)
             C[C_I] += (target - C[C_UFF] - u_fb) / coef
 
+    def _feedforward_at_last(self, *, state: np.ndarray | None = None) -> float:
+        """Feedforward command [V] of the current settings at the last step's reference.
+
+        The friction feedforward from its last forces, the compensation evaluated at the
+        last reference (on ``state``, the controller state, when given: a compensation
+        just loaded starts its own state there; otherwise on a copy, so nothing the run
+        depends on is stepped twice).
+        """
+        C = self.state
+        ff = self._ff
+        f = {Feedforward.NONE: 0.0, Feedforward.STATIC: C[C_FSTAT],
+             Feedforward.GMS: C[C_FGMS],
+             Feedforward.STATIC_GMS: C[C_FGMS] + self.plant.model.fv * C[C_RVL]}[ff]
+        u = f / self.plant.model.input_gain
+        if self._comp is not None:
+            work = C.copy() if state is None else state
+            u += compensation_command(self.packed, Q_SIZE, work, C_SIZE, C[C_RPREV],
+                                      C[C_RVL], C[C_RAL], C[C_DTL])
+        return u
+
+    def _bumpless(self, u_last: float) -> None:
+        """After a change of law or feedforward: the next command continues from u_last."""
+        self.state[C_UFF] = self._feedforward_at_last()
+        self._rebalance(u_last)
+
     def set_mode(self, mode: 'str | ControlMode', *, keep_estimates: bool = True) -> None:
         """Switch mode bumplessly: the integrator is re-balanced to the last output."""
         mode = ControlMode.parse(mode)
@@ -315,29 +366,23 @@ class Controller:
         if not keep_estimates:
             self._reset_estimates()
         if started:
-            self._rebalance(u_last)
+            self._bumpless(u_last)
 
     def set_feedforward(self, feedforward: 'str | Feedforward') -> None:
-        """Switch the friction feedforward bumplessly (the integrator absorbs the step)."""
+        """Switch the friction feedforward bumplessly (the integrator absorbs the step).
+
+        A loaded compensation gives up the friction terms the feedforward now carries
+        (:attr:`carried`), so nothing is counted twice.
+        """
         ff = Feedforward.parse(feedforward)
         if ff & Feedforward.GMS and self._gms is None:
             raise ParameterError(f'feedforward {ff.label!r} needs a presliding (GMS) effect '
                                  f'in the nominal model')
-        if ff is not Feedforward.NONE and self._comp is not None and self._comp.has_friction:
-            raise ParameterError(f'the compensation {self._comp.source} already cancels '
-                                 f'friction; feedforward {ff.label!r} would count it twice')
         u_last, started = self.state[C_U], self.state[C_INIT] > 0
         self._ff = ff
         self._pack()
         if started:
-            f = {Feedforward.NONE: 0.0, Feedforward.STATIC: self.state[C_FSTAT],
-                 Feedforward.GMS: self.state[C_FGMS],
-                 Feedforward.STATIC_GMS: self.state[C_FGMS]
-                 + self.plant.model.fv * self.state[C_RVL]}[ff]
-            self.state[C_UFF] = f / self.plant.model.input_gain
-            if self.state.shape[0] > C_SIZE:   # the compensation's share stays
-                self.state[C_UFF] += self.state[C_SIZE + CS_U]
-            self._rebalance(u_last)
+            self._bumpless(u_last)
 
     def update(self, *, mode: 'str | ControlMode | None' = None, **params: Any) -> None:
         """Change parameters of ``mode`` (default: current), validated, all or nothing."""
@@ -388,33 +433,31 @@ class Controller:
     def set_compensation(self, comp: Compensation | None) -> None:
         """Load (or with None remove) a compensation; bumpless while running.
 
-        Its friction would be counted twice with the friction feedforward, so a
-        compensation that cancels friction needs ``feedforward`` ``none``
-        (:class:`ParameterError` otherwise, nothing changed).  While running, the
-        integrator is re-balanced so the command does not jump: the new feedforward,
-        evaluated at the last reference, replaces what the integral held.
+        The terms this law carries itself (:attr:`carried`: the friction feedforward's,
+        the adaptive estimates) are left out of it, so nothing is counted twice; a
+        mode or feedforward switch re-packs them.  While running, the integrator is
+        re-balanced so the command does not jump: the new feedforward, evaluated at the
+        last reference, replaces what the integral held.  The same model with other
+        terms (:meth:`Compensation.with_terms`) keeps its GMS element state.
         """
-        if comp is not None and comp.has_friction and self._ff is not Feedforward.NONE:
-            raise ParameterError(
-                f'{comp.source} compensates friction ({", ".join(comp.compensated)}); '
-                f'with feedforward {self._ff.label!r} it would be counted twice: set '
-                f'feedforward none')
         Q, C = self.packed, self.state
         started = C[C_INIT] > 0
         u_last = C[C_U]
-        u_old = C[C_SIZE + CS_U] if C.shape[0] > C_SIZE else 0.0
-        block = comp.packed if comp is not None else np.zeros(0)
+        old = self._comp
         state = np.zeros(C_SIZE + (CS_SIZE if comp is not None else 0))
         state[:C_SIZE] = C[:C_SIZE]
-        packed = np.concatenate([Q[:Q_SIZE], block])
-        u_new = 0.0
-        if comp is not None and started:
-            # the new block at the last reference (GMS elements relaxed: dx = 0)
-            u_new = compensation_command(packed, Q_SIZE, state, C_SIZE, C[C_RPREV],
-                                         C[C_RVL], 0.0, C[C_DTL])
-        self.packed, self.state, self._comp = packed, state, comp
+        keep = (comp is not None and old is not None and comp.kind is CompensationKind.MODEL
+                and old.model is not None and comp.model is old.model)
+        if keep:
+            state[C_SIZE:] = C[C_SIZE:]
+        self._comp = comp
+        self.packed = np.concatenate([Q[:Q_SIZE], comp.packed if comp is not None
+                                      else np.zeros(0)])
+        self._pack()
+        self.state = state
         if started:
-            state[C_UFF] += u_new - u_old
+            # a new block starts its own state at the last reference (GMS relaxed)
+            state[C_UFF] = self._feedforward_at_last(state=None if keep else state)
             self._rebalance(u_last)
 
     @property
@@ -428,6 +471,7 @@ class Controller:
                **{k: v for k, v in self.params.as_dict().items()}}
         if self._comp is not None:
             out.update(self._comp.describe())
+            out['compensation_carried'] = self.carried.names(self._comp)
         return out
 
 

@@ -1,6 +1,6 @@
 """Reference trajectories with analytic position, velocity and acceleration.
 
-Four families (DESIGN.md §4):
+Five families (DESIGN.md §4):
 
 * :class:`Sinusoid` — slow sine with reversals (Chiew et al. §V: amplitude 3 mm);
   ``x = x0 + A·(1 − cos 2πt/P)`` starts at rest and reverses every ``P/2``.
@@ -10,6 +10,9 @@ Four families (DESIGN.md §4):
   constant-acceleration ramps (friction-curve identification).
 * :class:`Chirp` — linear chirp with a raised-cosine fade-in, rich excitation for
   fitting.
+* :class:`Table` — a CSV ``t, x[, v, a]`` (SI), e.g. an identification trajectory of
+  ``motor-comp excite``; between its rows a quintic Hermite polynomial through the
+  rows' position, velocity and acceleration.
 
 Every trajectory packs into one float vector whose first element is the kind code;
 :func:`traj_eval` (njit) evaluates any packed trajectory at one time.  The in-process
@@ -21,6 +24,8 @@ from __future__ import annotations
 import dataclasses
 import enum
 import functools
+import os
+from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
@@ -38,6 +43,7 @@ class TrajectoryKind(enum.IntEnum):
     POINT_TO_POINT = 1
     CONSTANT_VELOCITY = 2
     CHIRP = 3
+    TABLE = 4
 
 
 @dataclasses.dataclass(frozen=True)
@@ -130,6 +136,42 @@ def _chirp(T, t):
 
 
 @njit(**JIT_INLINE)
+def _table(T, t):
+    # packed: [kind, n, t[n], x[n], v[n], a[n]]; quintic Hermite between rows
+    n = int(T[1])
+    it, ix, iv, ia = 2, 2 + n, 2 + 2 * n, 2 + 3 * n
+    t = t + T[it]                  # the table's time starts at its first row
+    if t <= T[it]:
+        return T[ix], T[iv], T[ia]
+    if t >= T[it + n - 1]:        # after the last row: held there, at rest
+        if t == T[it + n - 1]:
+            return T[ix + n - 1], T[iv + n - 1], T[ia + n - 1]
+        return T[ix + n - 1], 0.0, 0.0
+    lo, hi = 0, n - 1
+    while hi - lo > 1:            # bisection: rows may have any (increasing) spacing
+        mid = (lo + hi) // 2
+        if T[it + mid] <= t:
+            lo = mid
+        else:
+            hi = mid
+    h = T[it + hi] - T[it + lo]
+    tau = t - T[it + lo]
+    x0, v0, a0 = T[ix + lo], T[iv + lo], T[ia + lo]
+    # the quintic with (x, v, a) of both rows at its ends: x0 + v0·τ + a0·τ²/2 +
+    # c3·τ³ + c4·τ⁴ + c5·τ⁵, its coefficients from the end conditions at τ = h
+    dx = T[ix + hi] - x0 - h * (v0 + 0.5 * h * a0)
+    dv = (T[iv + hi] - v0 - h * a0) * h
+    da = (T[ia + hi] - a0) * h * h
+    c3 = (10.0 * dx - 4.0 * dv + 0.5 * da) / (h * h * h)
+    c4 = (-15.0 * dx + 7.0 * dv - da) / (h * h * h * h)
+    c5 = (6.0 * dx - 3.0 * dv + 0.5 * da) / (h * h * h * h * h)
+    pos = x0 + tau * (v0 + tau * (0.5 * a0 + tau * (c3 + tau * (c4 + tau * c5))))
+    vel = v0 + tau * (a0 + tau * (3.0 * c3 + tau * (4.0 * c4 + tau * 5.0 * c5)))
+    acc = a0 + tau * (6.0 * c3 + tau * (12.0 * c4 + tau * 20.0 * c5))
+    return pos, vel, acc
+
+
+@njit(**JIT_INLINE)
 def traj_eval(T, t):
     """Evaluate a packed trajectory ``T`` at time ``t`` [s] → (x [m], v [m/s], a [m/s²])."""
     kind = int(T[0])
@@ -139,6 +181,8 @@ def traj_eval(T, t):
         return _point_to_point(T, t)
     if kind == 2:
         return _segments(T, t)
+    if kind == 4:
+        return _table(T, t)
     return _chirp(T, t)
 
 
@@ -373,13 +417,249 @@ class Chirp(Trajectory):
                          self.fade, self.offset], dtype=float)
 
 
+#: fewest rows of a table (a position-only table is differentiated by a quintic spline)
+TABLE_MIN_ROWS = 6
+#: column names of a table CSV header (SI: s, m, m/s, m/s²), and their long forms
+TABLE_COLUMNS = ('t', 'x', 'v', 'a')
+_COLUMN_ALIASES = {'t': 't', 'time': 't', 'x': 'x', 'position': 'x', 'v': 'v',
+                   'velocity': 'v', 'a': 'a', 'acceleration': 'a'}
+
+
+@dataclasses.dataclass(frozen=True)
+class TableData:
+    """The rows of a trajectory table, complete (SI units).
+
+    Attributes
+    ----------
+    t : ndarray
+        Times [s], strictly increasing.
+    x, v, a : ndarray
+        Position [m], velocity [m/s], acceleration [m/s²] at each time.
+    derived : tuple of str
+        The columns the file did not have (``v``, ``a``), derived from the others.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    derived: tuple = ()
+
+    @property
+    def duration(self) -> float:
+        """Time from the first row to the last [s]."""
+        return float(self.t[-1] - self.t[0])
+
+
+def table_from_arrays(t: Any, x: Any, v: Any = None, a: Any = None, *,
+                      source: str = 'table') -> TableData:
+    """Check a table's columns and derive the missing velocity and acceleration.
+
+    A missing ``v`` is the derivative of the quintic interpolating spline through
+    ``(t, x)`` and a missing ``a`` that of the cubic one through ``(t, v)``
+    (``scipy.interpolate.make_interp_spline``): smooth derivatives that keep every
+    given position exact (a table of a noisy measured position should be filtered
+    first, or carry its own ``v`` and ``a``).  Errors name ``source`` and the row,
+    never a cell's content.
+    """
+    from scipy.interpolate import make_interp_spline
+    cols = {'t': t, 'x': x, 'v': v, 'a': a}
+    arrays: dict[str, np.ndarray | None] = {}
+    for name, col in cols.items():
+        if col is None:
+            arrays[name] = None
+            continue
+        arr = np.asarray(col, dtype=float)
+        if arr.ndim != 1:
+            raise ParameterError(f'{source}: column {name} must be one-dimensional')
+        arrays[name] = arr
+    tt, xx = arrays['t'], arrays['x']
+    if tt is None or xx is None:
+        raise ParameterError(f'{source}: a table needs the columns t and x')
+    n = tt.shape[0]
+    for name, arr in arrays.items():
+        if arr is not None and arr.shape[0] != n:
+            raise ParameterError(f'{source}: column {name} has {arr.shape[0]} rows, t has {n}')
+    if n < TABLE_MIN_ROWS:
+        raise ParameterError(f'{source}: too short: {n} rows, a table needs at least '
+                             f'{TABLE_MIN_ROWS}')
+    for name, arr in arrays.items():
+        if arr is not None and not np.all(np.isfinite(arr)):
+            row = int(np.flatnonzero(~np.isfinite(arr))[0])
+            raise ParameterError(f'{source}: column {name} is not finite (NaN or inf) in '
+                                 f'data row {row + 1}')
+    bad = np.flatnonzero(np.diff(tt) <= 0.0)
+    if bad.size:
+        raise ParameterError(f'{source}: time is not strictly increasing at data row '
+                             f'{int(bad[0]) + 2}')
+    derived = []
+    vv, aa = arrays['v'], arrays['a']
+    if vv is None:
+        vv = make_interp_spline(tt, xx, k=5).derivative()(tt)
+        derived.append('v')
+    if aa is None:
+        aa = make_interp_spline(tt, vv, k=3).derivative()(tt)
+        derived.append('a')
+    return TableData(t=tt.copy(), x=xx.copy(), v=np.asarray(vv, dtype=float).copy(),
+                     a=np.asarray(aa, dtype=float).copy(), derived=tuple(derived))
+
+
+def parse_table(text: str, *, source: str = 'table') -> TableData:
+    """Parse the text of a table CSV: a header naming ``t, x[, v, a]``, numeric rows.
+
+    Lines starting with ``#`` are comments.  The header names the columns (any order;
+    ``time``, ``position``, ``velocity``, ``acceleration`` also accepted; a unit
+    suffix such as ``t_s`` or ``x [m]`` is ignored); without a header the columns are
+    ``t, x[, v, a]`` in that order.  Errors are one line naming ``source`` and the row
+    or column, never quoting the file's content (it may come from an untrusted
+    parameter).
+    """
+    rows: list[list[str]] = []
+    for line in text.splitlines():
+        line = line.strip()
+        if not line or line.startswith('#'):
+            continue
+        rows.append([c.strip() for c in line.split(',')])
+    if not rows:
+        raise ParameterError(f'{source}: empty trajectory table')
+    names = _header(rows[0], source)
+    if names is None:
+        width = len(rows[0])
+        if not 2 <= width <= 4:
+            raise ParameterError(f'{source}: expected the columns t, x[, v, a]; the first '
+                                 f'row has {width} columns and no header naming them')
+        names = TABLE_COLUMNS[:width]
+        data_rows = rows
+    else:
+        data_rows = rows[1:]
+    missing = [c for c in ('t', 'x') if c not in names]
+    if missing:
+        raise ParameterError(f'{source}: missing column {" and ".join(missing)} (a table '
+                             f'has the columns t, x[, v, a])')
+    values = np.empty((len(data_rows), len(names)))
+    for i, row in enumerate(data_rows):
+        if len(row) != len(names):
+            raise ParameterError(f'{source}: data row {i + 1} has {len(row)} columns, the '
+                                 f'header {len(names)}')
+        for j, cell in enumerate(row):
+            try:
+                values[i, j] = float(cell)
+            except ValueError:
+                raise ParameterError(f'{source}: data row {i + 1}, column {names[j]}: not '
+                                     f'a number') from None
+    cols = {name: values[:, j] for j, name in enumerate(names)}
+    return table_from_arrays(cols['t'], cols['x'], cols.get('v'), cols.get('a'),
+                             source=source)
+
+
+def _header(row: list[str], source: str) -> tuple[str, ...] | None:
+    """Column names of a header row, or None when the row is numbers."""
+    try:
+        [float(c) for c in row]
+        return None
+    except ValueError:
+        pass
+    names = []
+    for j, cell in enumerate(row):
+        key = cell.lower().replace('[', ' ').replace('(', ' ').replace('_', ' ').split()
+        name = _COLUMN_ALIASES.get(key[0]) if key else None
+        if name is None:
+            raise ParameterError(f'{source}: header column {j + 1} is not one of t, x, v, a')
+        if name in names:
+            raise ParameterError(f'{source}: header names column {name} twice')
+        names.append(name)
+    return tuple(names)
+
+
+def read_table_file(path: str | Path, *, param: str = 'traj.file') -> TableData:
+    """Read and parse a table CSV a user named (a regular file under the size bound).
+
+    One-line :class:`ParameterError` naming ``param`` and the file, never its content
+    (the reading rules of :mod:`motor_comp.param_files`, with the file's own
+    directory allowed).
+    """
+    from motor_comp.param_files import read_text
+    text = str(path)
+    if not text.strip():
+        raise ParameterError(f'{param}: a table trajectory needs a file (--set '
+                             f'{param}=F.csv)')
+    # the user named this file on the command line: its own directory is allowed
+    real_dir = Path(os.path.realpath(Path(text).expanduser())).parent
+    real, body = read_text(param, text, (real_dir,))
+    return parse_table(body, source=f'{param}: {real}')
+
+
+@dataclasses.dataclass(frozen=True)
+class Table(Trajectory):
+    """A trajectory table ``t, x[, v, a]`` (DESIGN.md §4), played from its first row.
+
+    Between rows the reference is the quintic Hermite polynomial through both rows'
+    position, velocity and acceleration (so ``x``, ``v``, ``a`` stay each other's
+    derivatives and every row is met exactly); before the first row the first is held,
+    after the last the last position is held at rest.
+
+    Parameters
+    ----------
+    file : str
+        The CSV file (:func:`parse_table`); read when ``data`` is not given.
+    data : TableData, optional
+        The rows themselves (a table read under other rules — ``trajectory_node`` reads
+        its file with :mod:`motor_comp.param_files` — or designed in memory).
+    """
+
+    file: str = ''
+    data: TableData | None = dataclasses.field(default=None, repr=False, compare=False)
+    kind = TrajectoryKind.TABLE
+    name = 'table'
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.file, str):
+            raise ParameterError(f'table.file must be a file name, got {self.file!r}')
+        if self.data is None:
+            object.__setattr__(self, 'data', read_table_file(self.file))
+        elif not isinstance(self.data, TableData):
+            raise ParameterError('table data must be a TableData (parse_table)')
+
+    @property
+    def duration(self) -> float:
+        """Time from the first row to the last [s]."""
+        return self.data.duration
+
+    def params(self) -> dict[str, Any]:
+        """Kind and file (the rows stay in the file)."""
+        return {'kind': self.name, 'file': self.file}
+
+    def packed(self) -> np.ndarray:
+        """Packed float vector for :func:`traj_eval`."""
+        d = self.data
+        return np.concatenate(([float(self.kind), float(d.t.shape[0])], d.t, d.x, d.v, d.a))
+
+
+def write_table(path: str | Path, data: TableData, *, comments: tuple = ()) -> None:
+    """Write a table CSV ``t,x,v,a`` (17 significant digits) with ``#`` comment lines.
+
+    :func:`parse_table` reads it back exactly (a float written with ``repr`` parses to
+    the same float).
+    """
+    import io
+    buf = io.StringIO()
+    for c in comments:
+        buf.write(f'# {c}\n')
+    buf.write('t,x,v,a\n')
+    for row in zip(data.t, data.x, data.v, data.a):
+        buf.write(','.join(repr(float(c)) for c in row) + '\n')
+    with Path(path).open('w', encoding='utf-8') as fh:
+        fh.write(buf.getvalue())
+
+
 TRAJECTORIES: dict[str, type[Trajectory]] = {
     'sine': Sinusoid, 'p2p': PointToPoint, 'cv': ConstantVelocity, 'chirp': Chirp,
+    'table': Table,
 }
 
 
 def make_trajectory(kind: str, **params: Any) -> Trajectory:
-    """Build a trajectory by name (``sine``, ``p2p``, ``cv``, ``chirp``) with parameters."""
+    """Build a trajectory by name (``sine``, ``p2p``, ``cv``, ``chirp``, ``table``)."""
     try:
         cls = TRAJECTORIES[kind]
     except KeyError:

@@ -60,10 +60,13 @@ Reliability (issue 8):
 * every gain ``<mode>.<field>`` (units and ranges from the control module) is live
   tunable; an invalid value is rejected with the reason and nothing changes;
 * ``compensation_model`` (a model YAML) or ``compensation_table`` (a position table
-  CSV of ``motor-comp export-table``) adds that model's effects as feedforward at the
-  reference state in any mode (:mod:`motor_comp.control.compensation`); set at run time
-  the file is loaded and validated first — a bad file is rejected with the reason and
-  the old compensation stays — and switched in bumplessly (the integrator re-balanced).
+  CSV of ``motor-comp export-table``) adds that model's inverse dynamics (or, with
+  ``compensation_terms: effects``, its effects only) as feedforward at the reference
+  state in any mode, less the terms the law carries itself
+  (:mod:`motor_comp.control.compensation`; the reference acceleration is the reference
+  message's effort); set at run time the file is loaded and validated first — a bad
+  file is rejected with the reason and the old compensation stays — and switched in
+  bumplessly (the integrator re-balanced); ``compensation_terms`` switches alike.
   The files (and a ``plant`` YAML) are read under :mod:`motor_comp.param_files`: only
   inside ``model_dir`` (read-only), only regular files under a size bound, and a
   rejection reason never quotes the file.
@@ -133,6 +136,9 @@ BASE_PARAMS = (
           'set, a bad file is rejected and the old compensation stays'),
     Param('compensation_table', '', 'Position compensation table (CSV of motor-comp '
           'export-table), interpolated (empty = none; exclusive with compensation_model)'),
+    Param('compensation_terms', 'full', 'Terms of compensation_model sent: the full inverse '
+          'dynamics (inertia, back-EMF, damping and effects) or its effects only; switched '
+          'bumplessly', choices=('full', 'effects')),
     Param('expected_subscribers', 2, 'Readers of voltage (plant + recorder) that must have '
           'matched this node\'s writer before it subscribes joint_states, so no reader '
           'misses the first commands (after 10 s it goes on with a warning)', '', 0, 100,
@@ -178,11 +184,13 @@ def gain_params(plant: PlantConfig) -> tuple[Param, ...]:
 class ControllerNode(ManagedNode):
     """Computes one command per measurement with the core controller step.
 
-    Managed node: ``configure`` builds the control law from the parameters and the
-    ``voltage`` publisher; ``activate`` subscribes ``reference`` and ``joint_states``
-    and starts the stale-data watchdog; while not active the node subscribes nothing
-    and so commands nothing (not even the watchdog's 0 V); ``deactivate`` drops a
-    pending measurement; ``cleanup`` drops the law (adaptive estimates included).
+    Managed node: ``configure`` builds the control law from the parameters (and, the
+    first time, the ``voltage`` publisher); ``activate`` subscribes ``reference`` and
+    ``joint_states`` and starts the stale-data watchdog; while not active the node
+    subscribes nothing and so commands nothing (not even the watchdog's 0 V);
+    ``deactivate`` drops a pending measurement; ``cleanup`` drops the law (adaptive
+    estimates included) and keeps the ``voltage`` writer (a drive's reader stays matched
+    to it).
     """
 
     def __init__(self) -> None:
@@ -211,7 +219,7 @@ class ControllerNode(ManagedNode):
         self.autostart()
 
     def configure(self) -> None:
-        """Build the control law (all modes' gains, ready for a switch) and the publisher."""
+        """Build the control law (all modes' gains ready); the first time, the publisher."""
         mode = self.p['mode']
         gains = {k.split('.', 1)[1]: v for k, v in self.p.items()
                  if k.startswith(mode + '.')}
@@ -219,6 +227,7 @@ class ControllerNode(ManagedNode):
                                      feedforward=self.p['feedforward'], **gains)
         comp = load_compensation(self.p, self.file_dirs)   # a bad file fails configure
         if comp is not None:
+            comp = comp.with_terms(self.p['compensation_terms'])
             controller.set_compensation(comp)
             self.get_logger().info(comp.summary())
         self.controller = controller
@@ -264,7 +273,8 @@ class ControllerNode(ManagedNode):
                                                   LIMITS_QOS)
         if self.guard is not None:
             self.get_logger().info(f'limits: {self.limits.describe(*self.guard.units)}')
-        self.pub = self.create_publisher(Float64, TOPIC_VOLTAGE, LOOP_QOS)
+        if self.pub is None:   # one writer for the node's life (see cleanup)
+            self.pub = self.create_publisher(Float64, TOPIC_VOLTAGE, LOOP_QOS)
         # lockstep: never outrun a lagging reader (the recorder) by the writer's history;
         # acknowledgements are per writer, so pacing joint_states alone does not bound
         # what this writer may overwrite (a stress run lost 51 commands of 16 337)
@@ -299,11 +309,15 @@ class ControllerNode(ManagedNode):
         self._stale = False
 
     def cleanup(self) -> None:
-        """Drop the law and the publisher (a new configure starts from the parameters)."""
+        """Drop the law (a new configure starts from the parameters); keep the writer.
+
+        The ``voltage`` writer lives as long as the node: a reader matches a new writer
+        only once discovery has told it (2.4 s on a loaded machine), and a drive whose
+        reader had not yet matched held its old command while a reconfigured controller
+        commanded — the axis stood, then jumped at the accumulated command.  An
+        unconfigured or inactive node publishes nothing on it all the same.
+        """
         self.deactivate()
-        if self.pub is not None:
-            self.destroy_publisher(self.pub)
-        self.pub = None
         self.controller = None
 
     def _make_watchdog(self, stale_timeout: float) -> Any:
@@ -597,23 +611,20 @@ class ControllerNode(ManagedNode):
                                      f'effect in the nominal plant {self.cfg.source}')
         comp_changed = bool({'compensation_model', 'compensation_table'} & changed.keys())
         comp = load_compensation(new, self.file_dirs) if comp_changed else ctl.compensation
-        if comp is not None and comp.has_friction and new['feedforward'] != 'none':
-            raise ParameterError(f'{comp.source} compensates friction; with feedforward '
-                                 f'{new["feedforward"]!r} it would be counted twice: set '
-                                 f'feedforward none')
+        if comp is not None:
+            terms = comp.with_terms(new['compensation_terms'])
+            comp_changed = comp_changed or terms is not comp
+            comp = terms
         if self.controller is None:
             return
-        if comp_changed and comp is None:   # off first, then a friction feedforward may go on
-            ctl.set_compensation(None)
         for mode, fields in staged.items():
             ctl.update(mode=mode, **fields)
         if 'mode' in changed:
             ctl.set_mode(new['mode'], keep_estimates=new['keep_estimates'])
         if 'feedforward' in changed:
             ctl.set_feedforward(new['feedforward'])
-        if comp_changed:
-            if comp is not None:
-                ctl.set_compensation(comp)
+        if comp_changed:   # after mode and feedforward: it leaves out what they carry
+            ctl.set_compensation(comp)
             self.get_logger().info(f'{comp.summary() if comp else "compensation off"} '
                                    f'from command {self.steps}')
         if 'stale_timeout' in changed and self._watchdog_timer is not None:

@@ -17,30 +17,52 @@ the node off the loop's critical path, and it may take the ticks in batches
 from the plant and the controller.  A parameter change therefore reaches the loop within
 ``lookahead`` ticks.
 
-Realtime: a wall-clock timer at ``control_rate``; trajectory time starts at the stamp t0
-of the plant's first measurement (the start point r(0), stamped with the wall clock, is held
-until then).  From then on each tick publishes the reference of the plant's sample grid
-``t0 + k·T`` one period ahead (every grid point not yet published up to
-``⌊(now − t0)/T⌋ + 1``, at most ``CATCH_UP`` missed ones after a stall), stamped with
-its grid time, so the controller finds the reference of exactly its measurement's stamp
-and a recording aligns reference and measurement without a hold error (ṙ·T ≈ 150 µm
-at 0.15 m/s when they are stamped at unrelated instants).
+Realtime: a wall-clock timer at ``control_rate``; trajectory time starts when the plant's
+first measurement (stamped t0) arrives, at ``now₀`` on this node's clock (the start point
+r(0), stamped with the wall clock, is held until then).  From then on each tick publishes
+the reference of the plant's sample grid ``t0 + k·T`` one period ahead (every grid point
+not yet published up to ``⌊(now − now₀)/T⌋ + 1``, at most ``CATCH_UP`` missed ones after a
+stall), stamped with its grid time, so the controller finds the reference of exactly
+its measurement's stamp and a recording aligns reference and measurement without a hold
+error (ṙ·T ≈ 150 µm at 0.15 m/s when they are stamped at unrelated instants).  The
+plant's stamps may run on another clock than this node's (a drive on another machine, a
+simulated plant whose sim time slipped behind the wall clock): only their grid is used.
+With ``wait_for_command`` the trajectory time starts only with the first measurement
+after a command was seen on ``voltage`` — the controller answering the held start point:
+a drive publishes its measurements from power-on, before the controller reads them, and
+a stress run of ``motor-comp autotune --external-plant`` lost the first 0.5 s of a table
+that way, the axis standing while the reference moved.
+
+End (``exit_at_end``, for a caller that runs one trajectory and waits for its end,
+as ``motor-comp autotune`` does on a drive with its own clock): once the reference of
+trajectory time ``duration`` has been published (realtime: at the grid point
+``duration·rate``, stamped ``t0 + duration``), no later reference is published, every
+reader is given the chance to acknowledge it and the process exits with status 0.  The
+controller then sees no reference and commands 0 V after its ``stale_timeout``.
 
 Start: the node joins the loop (subscribes ``/clock``, or starts its realtime timer)
 only once ``expected_subscribers`` readers (controller + recorder) matched its
 ``reference`` writer, and the plant starts only once it sees that subscription: no
 reader misses reference 0, whatever the order in which DDS discovery completes.
 
-Parameters: ``trajectory`` (``sine | p2p | cv | chirp``) and ``<kind>.<field>`` for
-every field of each trajectory class; changes are validated by building the new
-trajectory (rejected with the reason if invalid) and take effect at the next tick.
+Parameters: ``trajectory`` (``sine | p2p | cv | chirp | table``) and ``<kind>.<field>``
+for every field of each trajectory class; ``file``, the CSV ``t, x[, v, a]`` a
+``table`` plays (DESIGN.md §4).  Changes are validated by building the new trajectory
+(rejected with the reason if invalid) and take effect at the next tick.
+
+``file`` is untrusted input (anyone on the graph may set it): it is read with
+:mod:`motor_comp.param_files` — only inside the read-only ``model_dir`` directories
+(``:``-separated; default the working directory and the package's ``config/``), only a
+regular file under the size bound, never blocking — and a rejection names the rule or
+the row, never the file's content.
 
 Limits (issue 24): ``travel`` [min, max], ``vmax`` and ``amax`` (read-only, the same
 parameters as the controller's; infinite = none).  A trajectory whose reference leaves
 them anywhere on the control grid over ``duration`` (600 s when 0) is refused before it
 is published (:func:`motor_comp.control.limits.check_reference`): at start a one-line
 error and exit status 2, at run time a rejected parameter update (the old trajectory
-goes on) — rather than a trip of the controller mid-run.
+goes on) — rather than a trip of the controller mid-run.  A table is checked the same
+way, on its rows as played.
 """
 from __future__ import annotations
 
@@ -49,15 +71,20 @@ import dataclasses
 import time
 from typing import Any, Mapping
 
+from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
 
 from motor_comp.control.limits import check_reference
-from motor_comp.control.trajectories import TRAJECTORIES, Trajectory, make_trajectory
-from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, MOTION_LIMITS, \
-    REALTIME_PRIORITY, Pacer, Param, ParamNode, SUB_QOS, TOPIC_CLOCK, TOPIC_JOINT_STATES, \
-    TOPIC_REFERENCE, Timing, limits_from, period_ns, read_clock_ns, read_joint_state, \
-    run_node, set_realtime_priority, set_stamp
+from motor_comp.control.trajectories import TRAJECTORIES, Table, TableData, Trajectory, \
+    make_trajectory, parse_table
+from motor_comp.errors import ParameterError
+from motor_comp.param_files import parse_untrusted, read_text
+from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, MODEL_DIR, \
+    MOTION_LIMITS, REALTIME_PRIORITY, Pacer, Param, ParamNode, SUB_QOS, TOPIC_CLOCK, \
+    TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, Timing, limits_from, period_ns, \
+    read_clock_ns, read_joint_state, run_node, set_realtime_priority, set_stamp
 
 #: SI units of the trajectory fields, for the parameter descriptions
 _UNITS = {'amplitude': 'm', 'period': 's', 'offset': 'm', 'distance': 'm', 'move_time': 's',
@@ -69,6 +96,8 @@ def _trajectory_params() -> tuple[Param, ...]:
     """One parameter per field of every trajectory class, named ``<kind>.<field>``."""
     out = []
     for kind, cls in TRAJECTORIES.items():
+        if cls is Table:   # its one parameter is ``file`` (a path, read under model_dir)
+            continue
         for f in dataclasses.fields(cls):
             default = f.default
             default = tuple(float(v) for v in default) if isinstance(default, tuple) \
@@ -95,12 +124,23 @@ PARAMS = (
           '/clock (at most half the loop writers\' history); a parameter change reaches '
           'the loop within this many ticks', 'ticks', 1, LOOP_QOS.depth // 2,
           read_only=True),
-    Param('duration', 0.0, 'Lockstep: run length in sim time; no reference is published '
-          'for a tick past it (0 = no end), so the recording ends with the run', 's', 0.0,
-          1e7, read_only=True),
+    Param('duration', 0.0, 'Run length in trajectory time (0 = no end); lockstep: no '
+          'reference is published for a tick past it, so the recording ends with the run; '
+          'with exit_at_end the node exits after it', 's', 0.0, 1e7, read_only=True),
+    Param('wait_for_command', False, 'Realtime: start the trajectory time with the first '
+          'measurement after a command was seen on voltage (the loop is closed), not with '
+          'the first measurement: a drive measures from power-on, before its controller '
+          'answers (the start point is held until then)', read_only=True),
+    Param('exit_at_end', False, 'Exit (status 0) once the reference of trajectory time '
+          'duration is published and acknowledged (realtime: a caller waits for the end of '
+          'the trajectory; lockstep runs end with the plant\'s duration)', read_only=True),
     Param('batch_period', 0.002, 'Lockstep: take the queued /clock ticks in batches, pausing '
           'this long after each batch (0 = wake for every tick); keep it well below '
           'lookahead control periods of wall time', 's', 0.0, 0.05, read_only=True),
+    Param('file', '', 'Table trajectory: CSV with the columns t, x[, v, a] (SI: s, m, m/s, '
+          'm/s^2; v and a derived when absent) played when trajectory is table; read inside '
+          'model_dir, re-read when set'),
+    MODEL_DIR,
     REALTIME_PRIORITY,
 ) + MOTION_LIMITS + _trajectory_params()
 
@@ -126,6 +166,9 @@ class TrajectoryNode(ParamNode):
         # n_steps − 1; its command answers it, the reference of tick n_steps closes the run)
         self._last_k = (round(self.p['duration'] * self.p['control_rate'])
                         if self.p['duration'] > 0 else None)
+        # exit_at_end: the last grid point published before the node is done
+        self._end_k = self._last_k if self.p['exit_at_end'] else None
+        self._finished = False
         if self.timing is Timing.LOCKSTEP:
             self.batch_pause = self.p['batch_period']
         self._msg = JointState(name=[JOINT_NAME], position=array.array('d', [0.0]),
@@ -136,8 +179,11 @@ class TrajectoryNode(ParamNode):
         # lockstep: never outrun a lagging reader (the recorder) by the writer's history
         self._pub_out = Pacer(self.pub) if self.timing is Timing.LOCKSTEP else self.pub
         self._t0_ns: int | None = None
+        self._t0_rx_ns = 0  # realtime: this process's clock when the first sample arrived
         self._held_ns = 0   # realtime: stamp of the last held start point
         self._js_sub = None   # realtime: the first measurement's reader, until t0
+        self._u_sub = None    # realtime, wait_for_command: the command reader, until t0
+        self._loop_closed = not self.p['wait_for_command']
         # the plant starts when it sees our /clock (lockstep) or joint_states (realtime)
         # reader: create it only once our reference writer matched its readers, so none
         # of them misses reference 0 (a reader that sees our writer may not yet be seen
@@ -171,11 +217,16 @@ class TrajectoryNode(ParamNode):
             self._js_sub = self.mark_hot(self.create_subscription(
                 JointState, TOPIC_JOINT_STATES, self._on_first_measurement, SUB_QOS,
                 raw=True))
+            if self.p['wait_for_command']:
+                # a drive measures from power-on: start when the loop is closed
+                self._u_sub = self.mark_hot(self.create_subscription(
+                    Float64, TOPIC_VOLTAGE, self._on_command, SUB_QOS, raw=True))
             self.mark_hot(self.create_timer(self.dt_ns * 1e-9, self._on_tick))
 
-    @staticmethod
-    def _build(values: Mapping[str, Any]) -> Trajectory:
+    def _build(self, values: Mapping[str, Any]) -> Trajectory:
         kind = values['trajectory']
+        if kind == Table.name:
+            return Table(file=values['file'], data=self._read_table(values['file']))
         prefix = kind + '.'
         params = {k[len(prefix):]: v for k, v in values.items() if k.startswith(prefix)}
         return make_trajectory(kind, **params)
@@ -184,6 +235,24 @@ class TrajectoryNode(ParamNode):
         """Refuse a reference beyond the limits (ParameterError naming where)."""
         check_reference(trajectory, self.limits, duration=self.p['duration'],
                         rate=self.p['control_rate'])
+
+    def _read_table(self, path: str) -> TableData:
+        """Read the table ``file`` names (param_files rules; reasons without content)."""
+        if not path.strip():
+            raise ParameterError('file: the table trajectory needs a file (a CSV t, x[, v, a])')
+        real, text = read_text('file', path, self.file_dirs)
+
+        def parse(body: str) -> TableData | str:
+            # parse_table's reasons name a row or column, never a cell: passed on as
+            # they are; anything else it might raise is reduced by parse_untrusted
+            try:
+                return parse_table(body, source=f'file: {real}')
+            except ParameterError as exc:
+                return str(exc)
+        data = parse_untrusted('file', real, text, parse, what='trajectory table')
+        if isinstance(data, str):
+            raise ParameterError(data)
+        return data
 
     def apply_params(self, changed: Mapping[str, Any], new: Mapping[str, Any]) -> None:
         """Rebuild the trajectory (raises ParameterError with the reason if invalid)."""
@@ -223,6 +292,8 @@ class TrajectoryNode(ParamNode):
         for j in range(max(self._sent_k + 1, k), ahead + 1):
             self._publish_step(j)
         self._sent_k = max(self._sent_k, ahead)
+        if self._end_k is not None and self._sent_k >= self._end_k:
+            self._finished = True
         self._next_k = k + 1   # a later tick advances
 
     def _publish_step(self, k: int) -> None:
@@ -233,8 +304,14 @@ class TrajectoryNode(ParamNode):
     def _on_first_measurement(self, msg: JointState | bytes) -> None:
         # the subscription is dropped by the next tick (not here: the lean loop is
         # still iterating its subscriptions)
-        if self._t0_ns is None:
+        if self._t0_ns is None and self._loop_closed:
             self._t0_ns = read_joint_state(msg)[0]
+            self._t0_rx_ns = self.get_clock().now().nanoseconds
+
+    def _on_command(self, msg: Float64 | bytes) -> None:
+        # the controller answered a measurement (with the held start point): the loop is
+        # closed, the next measurement starts the trajectory
+        self._loop_closed = True
 
     def _on_tick(self) -> None:
         now = self.get_clock().now().nanoseconds
@@ -242,19 +319,40 @@ class TrajectoryNode(ParamNode):
             self.publish_at(0.0, now)
             self._held_ns = now
             return
-        if self._js_sub is not None:
-            self.hot_subscriptions.remove(self._js_sub)
-            self.destroy_subscription(self._js_sub)
-            self._js_sub = None
-        k_now = max(0, (now - self._t0_ns) // self.dt_ns)
-        # stamps only increase: the held start point may be stamped just after t0
-        self._next_k = max(self._next_k, (self._held_ns - self._t0_ns) // self.dt_ns + 1)
+        for sub in (self._js_sub, self._u_sub):
+            if sub is not None:
+                self.hot_subscriptions.remove(sub)
+                self.destroy_subscription(sub)
+        self._js_sub = self._u_sub = None
+        # trajectory time runs on this process's clock from the first sample's arrival: the
+        # plant's stamps may be on another clock (a drive on another machine, a simulated
+        # plant whose sim time slipped behind the wall clock), and counting from its stamp
+        # had started a slipped plant's trajectory seconds in, mid-move (a 29 mm step)
+        k_now = max(0, (now - self._t0_rx_ns) // self.dt_ns)
+        # stamps only increase: the held start point may be stamped just after t0 (on the
+        # same clock; across clocks the held points are on ours, the grid on the plant's)
+        held = self._held_ns - self._t0_ns
+        if 0 <= held <= CATCH_UP * self.dt_ns:
+            self._next_k = max(self._next_k, held // self.dt_ns + 1)
         # grid points missed while this process was descheduled are published too (up to
         # CATCH_UP of them): a plant that slipped needs them, and a recording then holds
         # the reference of every sample instead of holding an older one over the gap
-        for k in range(max(self._next_k, k_now - CATCH_UP), k_now + 2):
+        last = k_now + 1 if self._end_k is None else min(k_now + 1, self._end_k)
+        for k in range(max(self._next_k, k_now - CATCH_UP), last + 1):
             self.publish_at(k * (1.0 / self.p['control_rate']), self._t0_ns + k * self.dt_ns)
-        self._next_k = max(self._next_k, k_now + 2)
+        self._next_k = max(self._next_k, last + 1)
+        if self._end_k is not None and self._next_k > self._end_k:
+            self._finished = True
+
+    def finish(self, executor: Any) -> None:
+        """Give the readers the chance to acknowledge the last references (at most 2 s)."""
+        if executor is not None:
+            self.pub.wait_for_all_acked(Duration(seconds=2.0))
+
+    @property
+    def done(self) -> bool:
+        """With ``exit_at_end``: the reference of trajectory time ``duration`` is out."""
+        return self._finished
 
 
 def main(args: list[str] | None = None) -> int:

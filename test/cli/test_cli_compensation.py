@@ -64,15 +64,22 @@ def test_simulate_with_compensation(capsys, models):
     code, out, err = _cli(capsys, *args, '--compensation', models / 'ballscrew_true.yaml')
     assert code == 0, err
     comp = json.loads(out)['runs'][0]
-    assert comp['compensated'] == ['coulomb', 'viscous', 'stribeck', 'presliding']
-    assert 'delay' in comp['not_compensated']
+    assert comp['compensated'] == ['coulomb', 'viscous', 'stribeck', 'presliding', 'delay']
+    assert comp['not_compensated'] == {} and comp['compensation_terms'] == 'full'
     # the compensation from the plant's own model: tracking error and glitch fall
     assert comp['rms_error'] < 0.5 * base['rms_error']
     assert comp['max_glitch'] < 0.5 * base['max_glitch']
+    code, out, err = _cli(capsys, *args, '--compensation', models / 'ballscrew_true.yaml',
+                          '--compensation-terms', 'effects')
+    assert code == 0, err
+    effects = json.loads(out)['runs'][0]
+    assert effects['compensation_terms'] == 'effects'
+    # the inertia and the drive's damping are most of what the effects leave
+    assert comp['rms_error'] < 0.6 * effects['rms_error'] < 0.6 * base['rms_error']
     code, out, err = _cli(capsys, 'simulate', '--plant', 'ballscrew', '--controller', 'npid',
                           '--duration', '1', '--compensation',
                           models / 'ballscrew_true.yaml')
-    assert code == 0 and 'delay not compensated (a dead time' in out
+    assert code == 0 and '(full): inertia, back-EMF, damping, coulomb' in out
 
 
 def test_simulate_with_table(capsys, models, tmp_path):
@@ -106,8 +113,11 @@ def test_simulate_with_table(capsys, models, tmp_path):
     (['--compensation-table', '{d}/bad.yaml'], ['bad.yaml', 'expected columns']),
     (['--compensation', '{d}/cogging.yaml', '--compensation-table', '{d}/x.csv'],
      ['not allowed with']),
-    (['--compensation', '{d}/friction_only.yaml', '--feedforward', 'static'],
-     ['counted twice']),
+    (['--compensation-terms', 'effects'], ['--compensation-terms needs --compensation']),
+    (['--compensation-table', '{d}/x.csv', '--compensation-terms', 'full'],
+     ['--compensation-terms needs --compensation']),
+    (['--compensation', '{d}/cogging.yaml', '--compensation-terms', 'all'],
+     ['--compensation-terms', 'invalid choice']),
 ])
 def test_simulate_compensation_bad_input(capsys, models, argv, needles):
     argv = [a.format(d=models) for a in argv]

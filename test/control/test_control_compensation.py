@@ -5,8 +5,9 @@ of the tracking-error spectrum (at the ripple's spatial frequency × speed) fall
 and the quadrant glitch ≥ 3×, on both plants; the other effects' terms alone do not do
 it (the signature belongs to the effect).  Plus: one implementation of the laws (the
 feedforward equals the model's own effect forces), the position table reproduces the
-position-dependent force within 0.5 % of its amplitude, double counting and bad tables
-are refused with a reason, and switching the compensation on mid-run is bumpless.
+position-dependent force within 0.5 % of its amplitude, bad tables are refused with a
+reason, and switching the compensation on mid-run is bumpless.  (The full inverse
+dynamics and the terms a controller carries: ``test_control_full_compensation.py``.)
 """
 from __future__ import annotations
 
@@ -82,27 +83,26 @@ def test_gms_feedforward_is_the_effect_law(ballscrew):
     model = ballscrew.model.with_effect(make_effect('ripple', SCREW_RIPPLE)) \
         .with_effect(make_effect('offset', {'f0': 3.0})) \
         .with_effect(make_effect('asymmetry', {'dfc': 2.0, 'dfv': 30.0}))
-    comp = cm.from_model(model)
+    comp = cm.from_model(model, terms='effects')
     assert comp.compensated == ('coulomb', 'viscous', 'stribeck', 'presliding', 'ripple',
-                                'offset', 'asymmetry')
-    assert set(comp.not_compensated) == {'delay'}
-    assert 'dead time' in comp.not_compensated['delay']
+                                'offset', 'asymmetry', 'delay')
+    assert comp.not_compensated == {}
     dt = 1e-3
     t = np.arange(4000) * dt
     r = 2e-3 * np.sin(2 * np.pi * 0.5 * t) + 0.01 * t
     rv = np.concatenate([[0.0], np.diff(r) / dt])   # the GMS is driven by dx = rv·dt
-    got = comp.force_along(r, rv, dt)
+    got = comp.force_along(r, rv, dt, advance=False)
     expected = sum(model.effect_forces(r, rv, dt=dt).values())
     np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-9)
 
 
 def test_static_model_compensation_equals_static_force(pmlm):
     model = pmlm.model.with_effect(make_effect('spring', {'k': 300.0, 'x0': 0.01}))
-    comp = cm.from_model(model)
+    comp = cm.from_model(model, terms='effects')
     x = np.linspace(-0.05, 0.05, 501)
     v = 0.3 * np.sin(40 * x)
-    np.testing.assert_allclose(comp.force_along(x, v, 1e-3), model.static_force(x, v),
-                               rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(comp.force_along(x, v, 1e-3, advance=False),
+                               model.static_force(x, v), rtol=1e-12, atol=1e-9)
 
 
 def test_rotary_gravity_compensation_is_the_effect_law():
@@ -111,41 +111,32 @@ def test_rotary_gravity_compensation_is_the_effect_law():
                                              'gravity': {'mgl': 1.5, 'q0': -0.4},
                                              'ripple': {'period': 2 * math.pi / 12,
                                                         'harmonics': [[0.02, 0.01]]}}})
-    comp = cm.from_model(model)
+    comp = cm.from_model(model, terms='effects')
     assert 'gravity' in comp.compensated and comp.units['force'] == 'N·m'
     q = np.linspace(-4, 4, 801)
     w = 2.0 * np.cos(q)
-    f = comp.force_along(q, w, 1e-3)
+    f = comp.force_along(q, w, 1e-3, advance=False)
     np.testing.assert_allclose(f, model.static_force(q, w), rtol=1e-12, atol=1e-12)
     # the gravity term alone is mgl·sin(q − q0) (the effect's own law)
-    alone = cm.from_model(model.without('coulomb', 'ripple')).force_along(q, w, 1e-3)
+    alone = cm.from_model(model.without('coulomb', 'ripple'), terms='effects') \
+        .force_along(q, w, 1e-3, advance=False)
     np.testing.assert_allclose(alone, 1.5 * np.sin(q + 0.4), rtol=1e-12, atol=1e-12)
 
 
-def test_backlash_and_delay_reported_not_compensated():
+def test_backlash_reported_not_compensated_delay_sent_earlier():
     model = AxisModel.from_dict({'mass': 2.0, 'effects': {
         'coulomb': {'fc': 3.0}, 'delay': {'tau': 1e-3}, 'backlash': {'width': 1e-5}}})
     comp = cm.from_model(model, source='m.yaml')
-    assert comp.compensated == ('coulomb',)
-    assert set(comp.not_compensated) == {'delay', 'backlash'}
+    assert comp.compensated == ('coulomb', 'delay')
+    assert set(comp.not_compensated) == {'backlash'}
     assert 'gap in position' in comp.not_compensated['backlash']
     assert 'backlash not compensated' in comp.summary()
-
-
-def test_friction_twice_is_refused(pmlm):
-    comp = cm.from_model(pmlm.model, source='true.yaml')
-    ctrl = make_controller('pid', plant=pmlm, feedforward='static')
-    with pytest.raises(ParameterError, match='counted twice'):
-        ctrl.set_compensation(comp)
-    assert ctrl.compensation is None
-    # position-only compensation goes with any friction feedforward
-    position_only = pmlm.model.without('coulomb', 'stribeck', 'viscous')
-    ctrl.set_compensation(cm.from_model(position_only))
-    ctrl2 = make_controller('pid', plant=pmlm)
-    ctrl2.set_compensation(comp)
-    with pytest.raises(ParameterError, match='already cancels friction'):
-        ctrl2.set_feedforward('static')
-    assert ctrl2.feedforward.label == 'none'
+    # the dead time: the force of the reference 1 ms + T/2 ahead (a ramp at 0.1 m/s)
+    t = np.arange(50) * 1e-3
+    spring = cm.from_model(AxisModel.from_dict({'mass': 2.0, 'effects': {
+        'spring': {'k': 1000.0, 'x0': 0.0}, 'delay': {'tau': 1e-3}}}), terms='effects')
+    f = spring.force_along(0.1 * t, np.full(50, 0.1), 1e-3)
+    np.testing.assert_allclose(f, 1000.0 * 0.1 * (t + 1.5e-3), rtol=1e-12)
 
 
 @pytest.mark.parametrize('mode', ['pid', 'adaptive_sliding', 'npid'])
@@ -172,7 +163,8 @@ def test_added_in_every_mode_and_bumpless(pmlm, mode):
         if k == 150:   # compensation active: its command is part of the output
             assert ref.compensation_force == pytest.approx(
                 float(comp.force_along(np.array([s.position]), np.array([s.velocity]),
-                                       T)[0]), rel=1e-9)
+                                       T, ra=np.array([s.acceleration]),
+                                       carried=ref.carried)[0]), rel=1e-9)
     step_u = 40.0 / pmlm.model.input_gain          # what a bare switch-on would add
     assert jumps[199] < 0.2 * step_u
     assert jumps[199] < 5 * np.median(jumps[150:199]) + 1e-3
