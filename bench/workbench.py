@@ -62,7 +62,11 @@ def recovery_table(seeds: int, duration: float) -> None:
     print(f'{"effect":<11} {"seed":>4} {"rank":>4} {"explained":>9} {"NRMSE before":>12} '
           f'{"after":>7}  parameter error')
     hits = total = 0
-    for i, name in enumerate(n for n in VOCABULARY if n != 'gravity'):
+    # load_friction/position_friction: physics only so far (issue 23 item 3), no
+    # synthetic draw or fitter to plant and recover them with yet
+    planted = (n for n in VOCABULARY
+               if n not in ('gravity', 'load_friction', 'position_friction'))
+    for i, name in enumerate(planted):
         for s in range(seeds):
             seed = 100 + i + 1000 * s
             sc = scenario(name, seed=seed)

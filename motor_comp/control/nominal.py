@@ -8,7 +8,8 @@ derived from the true plant the way the source papers' controllers knew theirs:
   (Chiew eq. 1: A, B, τ) is identified from a frequency response, not read off a data
   sheet, so its ``identified`` preset keeps the mass;
 * **friction and ripple** levels (``coulomb.fc``, ``stribeck.fs``, ``viscous.fv``,
-  ``asymmetry.dfc/dfv``, ``offset.f0``; ripple harmonics) scaled by ``friction_factor``
+  ``asymmetry.dfc/dfv``, ``offset.f0``, ``load_friction.mu``, the knot values
+  ``position_friction.dfc``; ripple harmonics) scaled by ``friction_factor``
   and ``ripple_factor``: Tan, Huang & Lee 2002 start their adaptive estimates at 50 % of
   the truth in simulation (:attr:`NominalStart.HALF`) and at zero in the experiment
   (:attr:`NominalStart.ZERO`);
@@ -49,7 +50,8 @@ from motor_comp.physics.effects import make_effect
 
 #: force-level parameters scaled by ``friction_factor`` (effect → parameter names)
 FRICTION_LEVELS = {'coulomb': ('fc',), 'stribeck': ('fs',), 'viscous': ('fv',),
-                   'asymmetry': ('dfc', 'dfv'), 'offset': ('f0',)}
+                   'asymmetry': ('dfc', 'dfv'), 'offset': ('f0',), 'load_friction': ('mu',),
+                   'position_friction': ('dfc',)}
 
 
 class NominalStart(enum.Enum):
@@ -156,8 +158,9 @@ def derive_nominal(true: PlantConfig,
     for effect in true.model.effects:
         params = effect.params()
         if effect.name in FRICTION_LEVELS:
+            # the whole dry level fc + dfc(x) + mu·|F_in| scales: a known fraction of it
             for p in FRICTION_LEVELS[effect.name]:
-                params[p] = spec.friction_factor * params[p]
+                params[p] = _scaled(params[p], spec.friction_factor)
         elif effect.name == 'ripple':
             params['harmonics'] = [[spec.ripple_factor * a, spec.ripple_factor * b]
                                    for a, b in params['harmonics']]
@@ -167,11 +170,19 @@ def derive_nominal(true: PlantConfig,
             effects.append(effect)
             continue
         effects.append(make_effect(effect.name, params))
-    # all at once: the model checks fs >= fc, which holds only for the scaled pair
+    # all at once: the model checks fs >= fc and fc + dfc(x) >= 0, which hold only for
+    # the scaled set
     model = true.model.replace(mass=true.model.mass * spec.mass_factor, effects=tuple(effects))
     tag = ', '.join(f'{f.name}={getattr(spec, f.name):g}' for f in dataclasses.fields(spec))
     return dataclasses.replace(true, model=model,
                                source=f'nominal of {true.source or true.kind.value} ({tag})')
+
+
+def _scaled(value: Any, factor: float) -> Any:
+    """``factor·value`` for a number or elementwise for a list of numbers."""
+    if isinstance(value, list):
+        return [factor * v for v in value]
+    return factor * value
 
 
 __all__ = ['FRICTION_LEVELS', 'NominalSpec', 'NominalStart', 'PRESETS', 'default_start',

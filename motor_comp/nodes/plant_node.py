@@ -76,8 +76,8 @@ PARAMS = (
           -1e5, 1e5),
     Param('load_start', 0.0, 'Sim time the step load switches on', 's', 0.0, 1e7),
     Param('friction_scale', 1.0, 'Scale of the plant friction levels (coulomb fc, '
-          'stribeck fs, viscous fv): a worn, cold or re-lubricated axis, live', '', 0.0,
-          100.0),
+          'stribeck fs, viscous fv, load_friction mu, position_friction dfc): a worn, cold '
+          'or re-lubricated axis, live', '', 0.0, 100.0),
     Param('expected_subscribers', 2,
           'Lockstep: readers of joint_states to wait for before step 0 '
           '(controller + recorder)', '', 0, 100, read_only=True),
@@ -384,11 +384,22 @@ class PlantNode(ManagedNode):
 
 
 def scale_friction(model: AxisModel, scale: float) -> AxisModel:
-    """Return ``model`` with its Coulomb, Stribeck and viscous levels times ``scale``."""
-    field = {'coulomb': 'fc', 'stribeck': 'fs', 'viscous': 'fv'}
-    return model.replace(effects=tuple(
-        e.replace(**{field[e.name]: getattr(e, field[e.name]) * scale})
-        if e.name in field else e for e in model.effects))
+    """Return ``model`` with its friction levels times ``scale``.
+
+    Coulomb, Stribeck and viscous levels, and the load- and position-dependent rises of
+    the dry level (``mu``, the knot values ``dfc``): the whole level
+    ``fc + dfc(x) + mu·|F_in|`` scales, so it stays >= 0.  A ``mu`` scaled to 1 or more
+    is refused by the effect (one-line ParameterError, the node keeps its old values).
+    """
+    field = {'coulomb': 'fc', 'stribeck': 'fs', 'viscous': 'fv', 'load_friction': 'mu'}
+    effects = []
+    for e in model.effects:
+        if e.name in field:
+            e = e.replace(**{field[e.name]: getattr(e, field[e.name]) * scale})
+        elif e.name == 'position_friction':
+            e = e.replace(dfc=tuple(scale * v for v in e.dfc))
+        effects.append(e)
+    return model.replace(effects=tuple(effects))
 
 
 def main(args: list[str] | None = None) -> int:

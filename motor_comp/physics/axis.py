@@ -207,6 +207,18 @@ class AxisModel:
         if st is not None and st.fs < self.fc:
             raise ParameterError(
                 f'stribeck.fs [N] ({st.fs:g}) must be >= coulomb.fc [N] ({self.fc:g})')
+        if self.has('load_friction') and not self.has('coulomb'):
+            raise ParameterError("effect 'load_friction' needs 'coulomb': it raises the "
+                                 "Coulomb level fc by mu·|F_in|")
+        pf = self.get('position_friction')
+        if pf is not None:
+            x_low, low = pf.lowest
+            if self.fc + low < -1e-12 * (self.fc + float(np.max(np.abs(pf.values)))):
+                raise ParameterError(
+                    f'position_friction: the friction level fc + dfc(x) must be >= 0 on the '
+                    f'knots\' span, but it is {self.fc + low:.6g} {self.units.force} at x = '
+                    f'{x_low:.6g} {self.units.position} (coulomb.fc = {self.fc:g}; the '
+                    f'spline through dfc dips to {low:.6g} there)')
 
     # -- composition ---------------------------------------------------------------
     @property
@@ -274,6 +286,37 @@ class AxisModel:
         u = np.asarray(u, dtype=float)
         v = np.asarray(v, dtype=float)
         return self.input_gain * (u - self.back_emf * v) - self.damping * v
+
+    def dry_friction_shift(self, x: np.ndarray, *,
+                           f_in: np.ndarray | None = None) -> np.ndarray:
+        """Rise of the dry-friction level [N]: ``mu·|F_in| + dfc(x)`` (0 without both).
+
+        The load-dependent (``load_friction``) and position-dependent
+        (``position_friction``) friction raise ``fc`` and ``fs`` alike, here as in the
+        plant kernel.  Compensation and inverse models that know the level of the rest
+        of their friction law add this to it.
+
+        Parameters
+        ----------
+        x : ndarray
+            Positions [m].
+        f_in : ndarray, optional
+            Drive force at each sample [N], :meth:`input_force` of the applied (delayed)
+            command; required when the model has ``load_friction``.
+        """
+        x = np.asarray(x, dtype=float)
+        shift = np.zeros(np.shape(x))
+        lf = self.get('load_friction')
+        if lf is not None:
+            if f_in is None:
+                raise ParameterError('load_friction: the friction level needs the drive '
+                                     'force F_in [N] (f_in = AxisModel.input_force(u, v))')
+            shift = shift + lf.level(np.broadcast_to(np.asarray(f_in, dtype=float),
+                                                     np.shape(x)))
+        pf = self.get('position_friction')
+        if pf is not None:
+            shift = shift + pf.level(x.ravel()).reshape(np.shape(x))
+        return shift
 
     # -- model file ----------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
@@ -361,30 +404,44 @@ class AxisModel:
             yaml.safe_dump(self.to_dict(), fh, sort_keys=False)
 
     # -- memoryless force sum (workbench inverse model) ----------------------------
-    def static_force(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+    def static_force(self, x: np.ndarray, v: np.ndarray, *,
+                     f_in: np.ndarray | None = None) -> np.ndarray:
         """Σ of the memoryless effect forces [N] at (x, v).
 
         The sliding friction of a model with ``presliding`` is carried by its GMS
         elements (see :meth:`effect_forces`); here it is replaced by the static curve,
-        which the GMS force equals at constant velocity.
+        which the GMS force equals at constant velocity.  ``f_in`` [N] as in
+        :meth:`effect_forces` (required with ``load_friction``).
         """
-        return sum(self.effect_forces(x, v, dt=None).values(), np.zeros(np.shape(x)))
+        return sum(self.effect_forces(x, v, dt=None, f_in=f_in).values(),
+                   np.zeros(np.shape(x)))
 
-    def effect_forces(self, x: np.ndarray, v: np.ndarray, *,
-                      dt: float | None = None) -> dict[str, np.ndarray]:
+    def effect_forces(self, x: np.ndarray, v: np.ndarray, *, dt: float | None = None,
+                      f_in: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Force [N] of each force effect along samples (x [m], v [m/s]).
 
         On a rotary axis read torque [N·m] at angles [rad] and rates [rad/s].
 
         With ``dt`` [s] the samples are taken as a trajectory and ``presliding`` is
         simulated along it (its force then replaces coulomb + stribeck, which it
-        contains); without ``dt``, presliding contributes its steady-state curve.
+        contains, and the load- and position-dependent friction, which raise the level
+        of its Stribeck curve); without ``dt``, presliding contributes its steady-state
+        curve.
+
+        ``f_in`` [N] is the drive force at each sample, :meth:`input_force` of the
+        applied command (delayed, when the model has a ``delay``): ``load_friction``'s
+        law ``mu·|F_in|·sgn(v)`` needs it, so a model with that effect raises
+        :class:`ParameterError` without it.
         """
         x = np.asarray(x, dtype=float)
         v = np.asarray(v, dtype=float)
         fc, fs, vs, delta = self.stribeck_curve_params()
         out: dict[str, np.ndarray] = {}
         gms = self.get('presliding')
+        lf = self.get('load_friction')
+        if lf is not None and f_in is None:
+            raise ParameterError('load_friction: its force mu·|F_in|·sgn(v) needs the drive '
+                                 'force F_in [N] (f_in = AxisModel.input_force(u, v))')
         for e in self.effects:
             if e.kind is not EffectKind.FORCE:
                 continue
@@ -392,13 +449,18 @@ class AxisModel:
                 f = e.force(x, v, fc=fc)
             elif e.name == 'presliding':
                 continue
+            elif e.name == 'load_friction':
+                f = e.force(x, v, f_in=f_in)
             else:
                 f = e.force(x, v)
             out[e.name] = f
         if gms is not None and dt is not None:
-            f_gms = gms.force_along(x, dt, fc=fc, fs=fs, vs=vs, delta=delta)
-            out.pop('coulomb', None)
-            out.pop('stribeck', None)
+            shift = None
+            if lf is not None or self.has('position_friction'):
+                shift = self.dry_friction_shift(x, f_in=f_in)
+            f_gms = gms.force_along(x, dt, fc=fc, fs=fs, vs=vs, delta=delta, shift=shift)
+            for name in ('coulomb', 'stribeck', 'load_friction', 'position_friction'):
+                out.pop(name, None)
             out['presliding'] = f_gms
         return out
 

@@ -17,6 +17,12 @@ the net force exceeds the break-away level there, sliding the other way.  So the
 neither chatters through zero nor dwells at a reversal it should pass (a frictionless
 oscillator keeps its period).
 
+Load- and position-dependent friction (issue 23) raise the dry-friction level — Coulomb,
+the Stribeck break-away level, the Karnopp band at rest and the GMS curve ``s(v)`` — by
+``Δ = mu·|F_in| + dfc(x)`` [N] (:func:`level_shift`), with
+``F_in = input_gain·(u − back_emf·ẋ) − damping·ẋ`` of the applied (delayed) command and
+``(x, ẋ)`` of each RK4 stage (of the step's end for ``s(v)``).
+
 Speed (issue 7: ≥ 1000× real time in closed loop at 10 kHz): :func:`plant_advance` is
 one compiled function — its helpers are inlined at numba-IR level and read the
 per-advance constants from a tuple unpacked from ``P`` once, not from the arrays; the
@@ -26,16 +32,31 @@ previous step; ``1/M`` and ``1/vs`` are hoisted.  The exact special cases of the
 the effects' own ``force`` methods use them too.  Run under ``NUMBA_DISABLE_JIT=1`` the
 same code is the pure-Python reference (checked against the compiled kernel by the
 tests).
+
+The level shift must cost an axis without those effects nothing: an inlined shift in
+the RK4 stages (even one behind a branch), or merely handing the array ``P`` to the
+inlined helpers (reference counting), slowed the PMLM step by 10–30 %, and a copy of the
+static step called behind a per-step branch by 2–4 % (``bench/sim_speed.py``'s loops).
+So the helpers take a *shift source* ``src`` whose type selects the law while compiling
+(:func:`_shift`): None, which adds ``NO_SHIFT`` (−0.0; ``x + (−0.0) = x`` lets LLVM fold
+it away: the plain axis runs the code it ran before, bit for bit), or the array ``P``.
+:func:`plant_advance` as the drivers call it is the None version; for a model with
+``mu ≠ 0`` or knots it calls :data:`_advance_shifted`, the same function compiled a
+second time with ``P`` as the source.  The price is compile time: the second copy
+roughly doubles the kernel's first (uncached) compilation.
 """
 from __future__ import annotations
 
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import overload
 
 from motor_comp.physics.effects.backlash import play
 from motor_comp.physics.effects.gravity import gravity_torque
+from motor_comp.physics.effects.load_friction import load_friction_level
+from motor_comp.physics.effects.position_friction import MAX_KNOTS, spline_sum
 from motor_comp.physics.effects.presliding import MAX_ELEMENTS, gms_slip_rate, gms_step
 from motor_comp.physics.effects.ripple import MAX_HARMONICS, ripple_sum
 from motor_comp.physics.effects.stribeck import stribeck_level
@@ -68,7 +89,16 @@ P_UMAX = P_F0 + 5                 # command saturation [V]; inf = none
 P_QUANT = P_F0 + 6                # encoder resolution [m]; 0 = ideal
 P_DT = P_F0 + 7                   # physics step [s]
 P_GRAV_MGL, P_GRAV_Q0 = P_F0 + 8, P_F0 + 9   # gravity mgl [N·m], q0 [rad]; mgl 0 = none
-P_SIZE = P_F0 + 10
+P_LF_MU = P_F0 + 10               # load_friction mu [-]; 0 = none
+P_PF_N = P_F0 + 11                # position_friction knot count; 0 = none
+P_PF_X = P_PF_N + 1               # knots [m]
+P_PF_Y = P_PF_X + MAX_KNOTS       # dfc at the knots [N]
+P_PF_M = P_PF_Y + MAX_KNOTS       # spline slopes at the knots [N/m]
+P_SIZE = P_PF_M + MAX_KNOTS
+
+#: the level shift of an axis without load- or position-dependent friction (module
+#: docstring): −0.0, so that adding it is the identity LLVM removes
+NO_SHIFT = -0.0
 
 # _axis below unpacks the ripple amplitudes as 16-tuples
 assert MAX_HARMONICS == 16, 'update _axis() for the new MAX_HARMONICS'
@@ -107,6 +137,54 @@ def _axis(P):
                  P[P_SPRING_X0], P[P_GMS_ON] > 0.5, P[P_DT], P[P_GRAV_MGL], P[P_GRAV_Q0])
 
 
+@njit(**_JIT)
+def level_shift(P, x, v, u):
+    """Rise of the dry-friction level [N] at ``(x, v)`` under the applied command ``u``.
+
+    ``mu·|F_in| + dfc(x)``: the load-dependent friction (``load_friction``, with the
+    drive force ``F_in = gain·(u − bemf·v) − damping·v`` [N]) plus the position-dependent
+    one (``position_friction``, the spline packed at ``P_PF_*``); 0 without both.
+
+    Parameters
+    ----------
+    P : ndarray
+        Packed parameters.
+    x, v : float
+        Position [m] and velocity [m/s].
+    u : float
+        Command after saturation and delay [V] (or the model's input unit).
+    """
+    shift = 0.0
+    mu = P[P_LF_MU]
+    if mu != 0.0:
+        shift = load_friction_level(P[P_GAIN] * (u - P[P_BEMF] * v) - P[P_DAMP] * v, mu)
+    npf = int(P[P_PF_N])
+    if npf > 0:
+        shift += spline_sum(x, P, P_PF_X, P, P_PF_Y, P, P_PF_M, npf)
+    return shift
+
+
+def _shift(src, x, v, u):
+    """Level shift [N] from a shift source: :func:`level_shift` of ``P``, or ``NO_SHIFT``.
+
+    ``src`` is the packed ``P``, or None for an axis without load- or position-dependent
+    friction (and in the GMS stages, whose friction is the elements').  The pure-Python
+    form (``NUMBA_DISABLE_JIT=1``); compiled, the overload below picks
+    the law from the *type* of ``src`` while typing, so no branch is left in the code.
+    """
+    if isinstance(src, np.ndarray):
+        return level_shift(src, x, v, u)
+    return NO_SHIFT
+
+
+@overload(_shift, jit_options=_JIT)   # not inlined at IR level: LLVM inlines it anyway
+def _shift_compiled(src, x, v, u):
+    """Compile :func:`_shift`: ``level_shift`` for an array source, −0.0 for None."""
+    if isinstance(src, types.Array):
+        return lambda src, x, v, u: level_shift(src, x, v, u)
+    return lambda src, x, v, u: NO_SHIFT
+
+
 @njit(**_INLINE)
 def _ripple(A, x):
     """Position-periodic force [N] at ``x`` [m]: ripple plus gravity (0 without both).
@@ -137,49 +215,58 @@ def _drive_force(A, x, v, u, f_ext, rip):
 
 
 @njit(**_INLINE)
-def _sliding_friction(A, v, d):
-    """Static-model sliding friction [N] in direction ``d`` (±1) at velocity ``v``."""
-    fc = A.fc + d * A.half_dfc
-    fs = A.fs + d * A.half_dfc
+def _sliding_friction(A, v, d, shift):
+    """Static-model sliding friction [N] in direction ``d`` (±1) at velocity ``v``.
+
+    The levels ``fc±``/``fs±`` of the asymmetry, both raised by ``shift`` [N] (the load-
+    and position-dependent friction, :func:`level_shift`; ``NO_SHIFT`` without them).
+    """
+    fc = A.fc + d * A.half_dfc + shift
+    fs = A.fs + d * A.half_dfc + shift
     return d * stribeck_level(abs(v), fc, fs, A.inv_vs, A.delta)
 
 
 @njit(**_INLINE)
-def _breakaway(A, x, u, f_ext, rip):
+def _breakaway(A, src, x, u, f_ext, rip):
     """At rest at ``x``: direction (±1) in which the axis breaks away, or 0 if held.
 
     Returns ``(direction, net force [N])``; the break-away band is ``[−fs−, fs+]`` with
-    the direction-dependent levels ``fs± = fs ± dfc/2``.  A level below zero (|dfc| > 2·fs,
-    which the workbench may fit) counts as zero: rest with no net force stays rest, as
-    the force laws say at v = 0, instead of breaking away on its own.
+    the direction-dependent levels ``fs± = fs ± dfc/2``, both raised by the load- and
+    position-dependent friction at rest (shift source ``src``: ``mu·|gain·u| + dfc(x)``,
+    a stuck screw under a large drive force holds more).  A level below zero
+    (|dfc| > 2·fs, which the workbench may fit) counts as zero: rest with no net force
+    stays rest, as the force laws say at v = 0, instead of breaking away on its own.
     """
     f_net = _drive_force(A, x, 0.0, u, f_ext, rip)
-    if f_net > max(A.fs + A.half_dfc, 0.0):
+    shift = _shift(src, x, 0.0, u)
+    if f_net > max(A.fs + A.half_dfc + shift, 0.0):
         return 1.0, f_net
-    if f_net < -max(A.fs - A.half_dfc, 0.0):
+    if f_net < -max(A.fs - A.half_dfc + shift, 0.0):
         return -1.0, f_net
     return 0.0, f_net
 
 
 @njit(**_INLINE)
-def _friction_at(A, v, d, x, x0, gms_force, k_stick, c_stick):
+def _friction_at(A, src, v, d, x, x0, u, gms_force, k_stick, c_stick):
     """Friction [N] inside a step: static model in frozen direction ``d``, or GMS.
 
     GMS elements that stick act as springs with their micro-damping during the step
     (``gms_force + k_stick·(x−x0) + c_stick·v``: ``ż_i = v`` while sticking); treating them
     as a frozen force instead would make the explicit scheme pump energy into the
     pre-sliding oscillation.  ``gms_force`` holds the spring forces and the (frozen)
-    micro-damping of the slipping elements at the step's start.
+    micro-damping of the slipping elements at the step's start.  ``src`` is the shift
+    source of the static model's level at ``(x, v)`` under the command ``u``.
     """
     if A.gms:
         return gms_force + k_stick * (x - x0) + c_stick * v
-    return _sliding_friction(A, v, d)
+    return _sliding_friction(A, v, d, _shift(src, x, v, u))
 
 
 @njit(**_INLINE)
-def _rk4_frozen(A, x, v, u, f_ext, d, gms_force, k_stick, c_stick, dt, rip):
+def _rk4_frozen(A, src, x, v, u, f_ext, d, gms_force, k_stick, c_stick, dt, rip):
     """RK4 step of (x, v) with the friction direction ``d`` or the GMS state frozen.
 
+    ``src`` the shift source of the friction level (:func:`_shift`).
     ``rip`` is the ripple force at the start ``x``, which the caller already has.  The
     four stages run as a loop (one inlined copy of the force laws instead of four; LLVM
     unrolls it); the weighted sums accumulate in the order ``k1 + 2k2 + 2k3 + k4``.
@@ -195,7 +282,7 @@ def _rk4_frozen(A, x, v, u, f_ext, d, gms_force, k_stick, c_stick, dt, rip):
     for stage in range(4):
         if stage > 0:
             r = _ripple(A, xs)
-        f = _friction_at(A, vs, d, xs, x, gms_force, k_stick, c_stick)
+        f = _friction_at(A, src, vs, d, xs, x, u, gms_force, k_stick, c_stick)
         a = (_drive_force(A, xs, vs, u, f_ext, r) - f) * A.inv_mass
         w = 1.0 if stage == 0 or stage == 3 else 2.0
         sum_x += w * vs
@@ -207,7 +294,7 @@ def _rk4_frozen(A, x, v, u, f_ext, d, gms_force, k_stick, c_stick, dt, rip):
 
 
 @njit(**_INLINE)
-def _static_friction_step(A, x, v, u, f_ext, dt, rip):
+def _static_friction_step(A, src, x, v, u, f_ext, dt, rip):
     """One step of the static (Coulomb/Stribeck/viscous) friction model with stick–slip.
 
     Karnopp-style switch with event location: at rest the axis stays while the net force
@@ -215,7 +302,8 @@ def _static_friction_step(A, x, v, u, f_ext, dt, rip):
     frozen, and if the velocity reaches zero inside the step the integration stops at the
     zero-crossing (located by linear interpolation of v, then integrated exactly up to
     it) and the remaining time is spent stuck or sliding the other way.  ``rip`` is the
-    ripple force [N] at the start ``x``.
+    ripple force [N] at the start ``x``; ``src`` the shift source of the friction level
+    (:func:`_shift`).
 
     Returns
     -------
@@ -229,11 +317,11 @@ def _static_friction_step(A, x, v, u, f_ext, dt, rip):
     rounds = 0
     while rounds < 3:             # slide → rest → slide back; a third event ends at rest
         if not event and d == 0.0:
-            d, f_net = _breakaway(A, x, u, f_ext, rip)
+            d, f_net = _breakaway(A, src, x, u, f_ext, rip)
             if d == 0.0:          # static friction balances the net force
                 return x, 0.0, (impulse + f_net * t_left) / dt, 1.0
         # one call site for both spans keeps a single inlined copy of the RK4 stages
-        xn, vn, f = _rk4_frozen(A, x, v, u, f_ext, d, 0.0, 0.0, 0.0,
+        xn, vn, f = _rk4_frozen(A, src, x, v, u, f_ext, d, 0.0, 0.0, 0.0,
                                 tc if event else t_left, rip)
         if not event:
             if vn * d > 0.0:
@@ -249,7 +337,7 @@ def _static_friction_step(A, x, v, u, f_ext, dt, rip):
         x, v, d = xn, 0.0, 0.0
         t_left -= tc
         rounds += 1
-    _, f_net = _breakaway(A, x, u, f_ext, rip)
+    _, f_net = _breakaway(A, src, x, u, f_ext, rip)
     return x, 0.0, (impulse + f_net * t_left) / dt, 1.0
 
 
@@ -268,7 +356,7 @@ def _delayed_command(S, u, nbuf, n0, frac):
 
 
 @njit(**_JIT)
-def plant_advance(P, S, u, f_ext, n_sub):
+def plant_advance(P, S, u, f_ext, n_sub, shift_source=None):
     """Advance ``n_sub`` physics steps ``P[P_DT]`` holding command ``u`` and load ``f_ext``.
 
     Parameters
@@ -283,9 +371,20 @@ def plant_advance(P, S, u, f_ext, n_sub):
         External load force [N], subtracted like every effect force.
     n_sub : int
         Number of physics steps.
+    shift_source : None or ndarray
+        Internal; drivers leave it out.  The shift source of the friction level
+        (:func:`_shift`): left out, a model with load- or position-dependent friction
+        is handed to :data:`_advance_shifted` (this function compiled a second time,
+        with ``P`` as the source).  ``shift_source is None`` is decided while
+        compiling, so each compiled version holds one law only.
     """
     if n_sub <= 0:
         return
+    if shift_source is None:
+        if P[P_LF_MU] != 0.0 or P[P_PF_N] > 0.0:
+            _advance_shifted(P, S, u, f_ext, n_sub, P)
+            return
+    src = shift_source
     A = _axis(P)
     dt = A.dt
     umax = P[P_UMAX]
@@ -309,8 +408,11 @@ def plant_advance(P, S, u, f_ext, n_sub):
     f_fric = S[S_FRICTION]
     ueff = u
     rip = _ripple(A, x)           # ripple at the step's start: stage 1 of every RK4 step
-    # s(v) at the step's start (the end of the previous step): rate of slipping elements
-    s_v = _sliding_friction(A, v, np.sign(v)) if A.gms else 0.0
+    # s(v) at the step's start (the end of the previous step, with the command applied
+    # there): rate of slipping elements
+    s_v = 0.0
+    if A.gms:
+        s_v = _sliding_friction(A, v, np.sign(v), _shift(src, x, v, S[S_UEFF]))
     for _ in range(n_sub):
         if delayed:
             ueff = _delayed_command(S, u, nbuf, n0, frac)
@@ -329,15 +431,17 @@ def plant_advance(P, S, u, f_ext, n_sub):
                     # at the step's start (Ḟ_i from the published slip law)
                     f_gms += P[P_GMS_SIGMA + i] / P[P_GMS_K + i] * gms_slip_rate(
                         fi, P[P_GMS_ALPHA + i], attraction, s_v)
-            xn, vn, _ = _rk4_frozen(A, x, v, ueff, f_ext, 0.0, f_gms, k_stick, c_stick, dt,
-                                    rip)
+            # (GMS: the friction inside the step is the elements', no level to shift)
+            xn, vn, _ = _rk4_frozen(A, None, x, v, ueff, f_ext, 0.0, f_gms, k_stick,
+                                    c_stick, dt, rip)
             # the elements follow the direction-dependent Stribeck curve (fc±, fs± of the
-            # asymmetry effect), so asymmetry acts on the dynamics, not only on the report
-            s_v = _sliding_friction(A, vn, np.sign(vn))
+            # asymmetry effect), so asymmetry acts on the dynamics, not only on the report;
+            # load- and position-dependent friction raise it at the step's end
+            s_v = _sliding_friction(A, vn, np.sign(vn), _shift(src, xn, vn, ueff))
             f_fric = gms_step(S, S_GMS_F, S, S_GMS_SLIP, P, P_GMS_ALPHA, P, P_GMS_K,
                               P, P_GMS_SIGMA, n_gms, attraction, dt, xn - x, vn, s_v)
         else:
-            xn, vn, f_fric, stuck = _static_friction_step(A, x, v, ueff, f_ext, dt, rip)
+            xn, vn, f_fric, stuck = _static_friction_step(A, src, x, v, ueff, f_ext, dt, rip)
         if xn != x:
             rip = _ripple(A, xn)
         x = xn
@@ -354,6 +458,12 @@ def plant_advance(P, S, u, f_ext, n_sub):
         rip -= gravity_torque(x, A.mgl, A.q0)
     S[S_RIPPLE] = rip
     S[S_UEFF] = ueff
+
+
+#: :func:`plant_advance` compiled on its own, called with ``shift_source = P``: the copy
+#: of the step with load- and position-dependent friction (a second dispatcher, so the
+#: plain version calls it without recursion)
+_advance_shifted = njit(**_JIT)(getattr(plant_advance, 'py_func', plant_advance))
 
 
 @njit(**_JIT)

@@ -124,6 +124,16 @@ def pack_params(model: AxisModel, sensors: Sensors, dt: float) -> np.ndarray:
     grav = model.get('gravity')
     if grav is not None:
         P[K.P_GRAV_MGL], P[K.P_GRAV_Q0] = grav.mgl, grav.q0
+    lf = model.get('load_friction')
+    if lf is not None:
+        P[K.P_LF_MU] = lf.mu
+    pf = model.get('position_friction')
+    if pf is not None:
+        n = len(pf.x)
+        P[K.P_PF_N] = n
+        P[K.P_PF_X:K.P_PF_X + n] = pf.knots
+        P[K.P_PF_Y:K.P_PF_Y + n] = pf.values
+        P[K.P_PF_M:K.P_PF_M + n] = pf.slopes
     P[K.P_UMAX] = sensors.saturation
     P[K.P_QUANT] = sensors.encoder_resolution
     P[K.P_DT] = dt

@@ -24,7 +24,8 @@ speeds = st.floats(min_value=1e-6, max_value=10.0)
 
 def test_vocabulary_is_design_section_6():
     assert VOCABULARY == ('coulomb', 'viscous', 'stribeck', 'presliding', 'ripple',
-                          'offset', 'spring', 'asymmetry', 'delay', 'backlash', 'gravity')
+                          'offset', 'spring', 'asymmetry', 'delay', 'backlash', 'gravity',
+                          'load_friction', 'position_friction')
     assert all(EFFECTS[name].name == name for name in VOCABULARY)
 
 
@@ -64,6 +65,28 @@ BAD = [
     ('backlash', {'width': -1e-6}, 'backlash.width'),
     ('backlash', {'width': 0.02}, 'backlash.width'),
     ('coulomb', {'fk': 1.0}, "'fk'"),
+    ('load_friction', {'mu': -0.1}, 'load_friction.mu'),
+    ('load_friction', {'mu': 1.0}, 'load_friction.mu'),
+    ('load_friction', {'mu': float('nan')}, 'load_friction.mu'),
+    ('load_friction', {'mu': 'high'}, 'load_friction.mu'),
+    ('position_friction', {'x': [0.0, 0.1]}, "'dfc'"),
+    ('position_friction', {'dfc': [0.0, 1.0]}, "'x'"),
+    ('position_friction', {'x': [0.0], 'dfc': [1.0]}, 'position_friction.x'),
+    ('position_friction', {'x': [i * 0.01 for i in range(33)], 'dfc': [0.0] * 33},
+     'position_friction.x'),
+    ('position_friction', {'x': [0.0, 0.1, 0.1], 'dfc': [0.0, 1.0, 0.0]},
+     'position_friction.x'),
+    ('position_friction', {'x': [0.0, 0.2, 0.1], 'dfc': [0.0, 1.0, 0.0]},
+     'position_friction.x'),
+    ('position_friction', {'x': [0.0, 0.1, 0.2], 'dfc': [0.0, 1.0]}, 'position_friction.dfc'),
+    ('position_friction', {'x': [0.0, float('inf')], 'dfc': [0.0, 1.0]},
+     'position_friction.x[1]'),
+    ('position_friction', {'x': [0.0, 0.1], 'dfc': [0.0, None]}, 'position_friction.dfc[1]'),
+    ('position_friction', {'x': '0 0.1', 'dfc': [0.0, 1.0]}, 'position_friction.x'),
+    ('position_friction', {'x': 0.1, 'dfc': [0.0, 1.0]}, 'position_friction.x'),
+    ('position_friction', {'x': [0.0, 1e-12], 'dfc': [0.0, 1.0]}, 'closer than 1e-09'),
+    ('position_friction', {'x': [0.0, 2e6], 'dfc': [0.0, 1.0]}, 'position_friction.x[1]'),
+    ('position_friction', {'x': [0.0, 1.0], 'dfc': [0.0, -2e9]}, 'position_friction.dfc[1]'),
 ]
 
 
@@ -93,6 +116,8 @@ def test_params_round_trip_through_the_model_file_form(name):
         'offset': {'f0': -4.0}, 'spring': {'k': 250.0, 'x0': 0.01},
         'asymmetry': {'dfc': 1.5, 'dfv': -3.0}, 'delay': {'tau': 0.002},
         'backlash': {'width': 5e-6}, 'gravity': {'mgl': 3.0, 'q0': -0.5},
+        'load_friction': {'mu': 0.15},
+        'position_friction': {'x': [-0.05, 0.0, 0.012, 0.1], 'dfc': [0.0, 2.5, -1.0, 0.5]},
     }
     e = make_effect(name, examples[name])
     assert e.params() == examples[name]

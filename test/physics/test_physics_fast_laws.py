@@ -181,8 +181,13 @@ def _cases():
     gms = [e for e in every if e[0] != 'stribeck'] + [('presliding', _GMS)]
     delta2 = [('coulomb', {'fc': 3.0}), ('stribeck', {'fs': 5.0, 'vs': 0.01, 'delta': 2.0}),
               ('viscous', {'fv': 10.0})]
+    # issue 23: the level shift mu·|F_in| + dfc(x) runs in its own compiled copy of the
+    # step (kernel._advance_shifted), so it is compared on its own, static and GMS
+    shifted = [('load_friction', {'mu': 0.05}),
+               ('position_friction', {'x': [-0.004, -0.001, 0.003], 'dfc': [0.0, 0.4, -0.5]})]
     return {'pmlm': 'pmlm', 'ballscrew': 'ballscrew', 'every_static': every,
-            'every_gms': gms, 'delta2': delta2}
+            'every_gms': gms, 'delta2': delta2, 'shifted_static': every + shifted,
+            'shifted_gms': gms + shifted}
 
 
 def test_compiled_kernel_equals_its_pure_python_run_on_every_effect(jit_and_pure):

@@ -21,6 +21,8 @@ EVERY_EFFECT = {
     'asymmetry': {'dfc': 2.0, 'dfv': 10.0},
     'delay': {'tau': 0.00129},
     'backlash': {'width': 4e-6},
+    'load_friction': {'mu': 0.08},
+    'position_friction': {'x': [-0.2, 0.05, 0.07, 0.3], 'dfc': [0.0, 6.5, -2.0, 1.0]},
 }
 
 

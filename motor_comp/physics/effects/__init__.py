@@ -10,7 +10,9 @@ from motor_comp.physics.effects.base import BOTH_AXES, AxisKind, Effect, EffectK
 from motor_comp.physics.effects.coulomb import Coulomb
 from motor_comp.physics.effects.delay import Delay
 from motor_comp.physics.effects.gravity import Gravity
+from motor_comp.physics.effects.load_friction import LoadFriction
 from motor_comp.physics.effects.offset import Offset
+from motor_comp.physics.effects.position_friction import PositionFriction
 from motor_comp.physics.effects.presliding import Presliding
 from motor_comp.physics.effects.ripple import Ripple
 from motor_comp.physics.effects.spring import Spring
@@ -20,7 +22,8 @@ from motor_comp.physics.effects.viscous import Viscous
 #: the effect vocabulary of DESIGN.md §6, in canonical order
 EFFECTS: dict[str, type[Effect]] = {
     cls.name: cls for cls in (Coulomb, Viscous, Stribeck, Presliding, Ripple, Offset,
-                              Spring, Asymmetry, Delay, Backlash, Gravity)
+                              Spring, Asymmetry, Delay, Backlash, Gravity, LoadFriction,
+                              PositionFriction)
 }
 
 VOCABULARY: tuple[str, ...] = tuple(EFFECTS)
@@ -37,5 +40,6 @@ def make_effect(name: str, params: Mapping[str, Any] | None = None) -> Effect:
 
 
 __all__ = ['EFFECTS', 'VOCABULARY', 'AxisKind', 'BOTH_AXES', 'Effect', 'EffectKind',
-           'make_effect', 'Asymmetry', 'Backlash', 'Coulomb', 'Delay', 'Gravity', 'Offset',
-           'Presliding', 'Ripple', 'Spring', 'Stribeck', 'Viscous']
+           'make_effect', 'Asymmetry', 'Backlash', 'Coulomb', 'Delay', 'Gravity',
+           'LoadFriction', 'Offset', 'PositionFriction', 'Presliding', 'Ripple', 'Spring',
+           'Stribeck', 'Viscous']

@@ -142,7 +142,21 @@ def gms_trajectory(x, alpha, k, sigma, C, fc, fs, vs, delta, dt):
     """GMS friction [N] along a sampled displacement ``x`` [m] at step ``dt`` [s].
 
     ``s(v)`` is evaluated at each step's mean velocity ``Δx/dt``; the elements start
-    relaxed at the first sample.
+    relaxed at the first sample.  (:func:`gms_trajectory_shifted` with no shift: the
+    same numbers, ``fc + 0.0`` is ``fc``.)
+    """
+    return gms_trajectory_shifted(x, np.zeros(x.shape[0]), alpha, k, sigma, C, fc, fs, vs,
+                                  delta, dt)
+
+
+@njit(cache=True)
+def gms_trajectory_shifted(x, shift, alpha, k, sigma, C, fc, fs, vs, delta, dt):
+    """GMS friction [N] along ``x`` [m] with the dry-friction level raised by ``shift`` [N].
+
+    As :func:`gms_trajectory`, with the Stribeck curve of step ``j`` (ending at sample
+    ``j``) ``s(v) = sgn(v)·[fc + shift[j] + (fs − fc)·e^{−|v/vs|^δ}]``: the load- and
+    position-dependent friction (``mu·|F_in| + dfc(x)`` at the step's end, as the plant
+    kernel evaluates it) raise the level every element relaxes towards.
     """
     n = x.shape[0]
     out = np.zeros(n)
@@ -151,7 +165,7 @@ def gms_trajectory(x, alpha, k, sigma, C, fc, fs, vs, delta, dt):
     for j in range(1, n):
         dx = x[j] - x[j - 1]
         v = dx / dt
-        s_v = stribeck_curve(v, fc, fs, vs, delta)
+        s_v = stribeck_curve(v, fc + shift[j], fs + shift[j], vs, delta)
         out[j] = gms_update(forces, slip, alpha, k, sigma, C, dx, v, s_v, dt)
     return out
 
@@ -255,17 +269,23 @@ class Presliding(Effect):
         return dataclasses.replace(self, sigma=tuple(s * t for s in self.k))
 
     def force_along(self, x: np.ndarray, dt: float, *, fc: float, fs: float | None = None,
-                    vs: float = 1e-3, delta: float = 1.0) -> np.ndarray:
+                    vs: float = 1e-3, delta: float = 1.0,
+                    shift: np.ndarray | None = None) -> np.ndarray:
         """GMS friction ``Σ(F_i + σ_i·ż_i)`` [N] along samples ``x`` [m] spaced ``dt`` [s].
 
         The element state starts relaxed at the first sample; ``fc``/``fs``/``vs``/``delta``
         define the Stribeck curve (``fs`` defaults to ``fc``: no Stribeck effect).
+        ``shift`` [N], one value per sample, raises the curve's level there (load- and
+        position-dependent friction, :func:`gms_trajectory_shifted`).
         """
         fs = fc if fs is None else fs
-        return gms_trajectory(np.ascontiguousarray(x, dtype=float),
-                              np.array(self.alpha), np.array(self.k), np.array(self.sigma),
-                              self.C, float(fc), float(fs), float(vs), float(delta),
-                              float(dt))
+        x = np.ascontiguousarray(x, dtype=float)
+        args = (np.array(self.alpha), np.array(self.k), np.array(self.sigma), self.C,
+                float(fc), float(fs), float(vs), float(delta), float(dt))
+        if shift is None:
+            return gms_trajectory(x, *args)
+        shift = np.ascontiguousarray(np.broadcast_to(np.asarray(shift, dtype=float), x.shape))
+        return gms_trajectory_shifted(x, shift, *args)
 
 
 #: the one-line message for the pre-published slip-rate key in a stand-alone effect

@@ -1,0 +1,287 @@
+"""Position-dependent dry friction: the level varies along the travel, ``fc + dfc(x)``.
+
+Tight spots, wear and contamination of a guideway or a screw raise (or lower) the dry
+friction over part of the travel (DESIGN.md §6, issue 23).  ``dfc(x)`` [N] is a cubic
+spline through knots ``x_j`` [m] with values ``dfc_j`` [N], **clamped** with zero slope
+at the end knots and constant beyond them; it shifts the Coulomb level and the
+break-away (Stribeck) level alike, so the static curve becomes
+``[fc + dfc(x) + (fs − fc)·e^{−|ẋ/vs|^δ}]·sgn(ẋ)`` and the Karnopp band at rest
+``±(fs + dfc(x))``.  No paper is behind the shape: a tight spot is a local excess of the
+friction level, and a smooth interpolation through a few measured levels is the least
+one can assume about it.
+
+Why this spline.  The identification fits ``dfc`` by least squares, so the law must be
+linear in the knot values: ``dfc(x) = Σ_j dfc_j·b_j(x)`` with fixed basis functions
+``b_j`` (:meth:`PositionFriction.basis`).  An interpolating cubic spline is (its
+slopes solve a linear system in the values); the zero end slopes make the constant
+continuation beyond the end knots continuous in slope too (C¹ on the whole line), where
+a natural spline would leave a kink in the friction level at each end of the span.  The
+spline is written in Hermite form — knot values and knot slopes, the slopes ``S·dfc``
+from the clamped-spline system solved once by :class:`scipy.interpolate.CubicSpline` —
+so it passes through every knot value exactly, and the compiled law
+(:func:`spline_sum`) is a bisection and one cubic.  A law evaluated inside the plant's
+RK4 stages cannot call scipy, which is why the evaluation is written here.
+
+Bounds: 2..:data:`MAX_KNOTS` knots, strictly increasing by at least
+:data:`MIN_SPACING`, within ±:data:`MAX_POSITION`; ``|dfc| <= MAX_LEVEL``.  The level
+``fc + dfc(x)`` must not go below 0 anywhere: the model (:class:`AxisModel`) checks
+``fc + min dfc(x) >= 0`` over the knots' span (the spline may dip below its lowest knot
+value between knots: :attr:`PositionFriction.lowest` finds the true minimum).  What the
+model cannot check — a direction-dependent level ``fc − |asymmetry.dfc|/2 + dfc(x)``
+that goes negative, as an over-fitted asymmetry can — is handled as the kernel handles
+asymmetry: a negative break-away level counts as zero at rest.
+
+Units: x [m], dfc [N]; on a rotary axis read rad and N·m.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from motor_comp.errors import ParameterError, check_finite
+from motor_comp.physics.effects.base import Effect
+
+#: largest number of knots the compiled kernels carry
+MAX_KNOTS = 32
+#: knots lie within ±this [m or rad]: 1000 km of travel or 160 000 revolutions, beyond
+#: any axis, and far enough from overflow for the spline's powers of the spacing
+MAX_POSITION = 1e6
+#: closest knot spacing [m or rad]: a friction profile finer than a nanometre (or
+#: nanoradian) is below any encoder; it also keeps the slopes ``dfc/spacing`` finite
+MIN_SPACING = 1e-9
+#: largest |dfc| at a knot [N or N·m]
+MAX_LEVEL = 1e9
+
+
+@njit(cache=True, inline='always', error_model='numpy')
+def spline_sum(x, knots, ik, values, iv, slopes, im, n):
+    """Friction-level change ``dfc(x)`` [N] at ``x`` [m] of a Hermite cubic through knots.
+
+    The knots are ``knots[ik + j]`` (strictly increasing), the values
+    ``values[iv + j]`` [N] and the slopes ``slopes[im + j]`` [N/m], ``j < n``, ``n >= 2``:
+    packed vectors with offsets, as the plant kernel passes its parameter vector (no
+    array views in its inner loop).  Constant beyond the end knots; exactly the knot
+    value at a knot.  On a segment of length ``h`` with ``t = (x − x_j)/h``, ``s = 1 − t``
+    (Hermite basis): ``(1 + 2t)·s²·y_j + t²·(3 − 2t)·y_{j+1} + h·t·s·(s·m_j − t·m_{j+1})``.
+
+    Parameters
+    ----------
+    x : float
+        Position [m].
+    knots, values, slopes : ndarray
+        Packed knot positions [m], values [N] and slopes [N/m].
+    ik, iv, im : int
+        Offsets of the first knot, value and slope.
+    n : int
+        Number of knots.
+    """
+    if x <= knots[ik]:
+        return values[iv]
+    if x >= knots[ik + n - 1]:
+        return values[iv + n - 1]
+    lo = 0
+    hi = n - 1
+    while hi - lo > 1:            # bisection: at most 5 halvings for 32 knots
+        mid = (lo + hi) >> 1
+        if knots[ik + mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    x0 = knots[ik + lo]
+    h = knots[ik + hi] - x0
+    t = (x - x0) / h
+    s = 1.0 - t
+    return ((1.0 + 2.0 * t) * s * s * values[iv + lo]
+            + t * t * (3.0 - 2.0 * t) * values[iv + hi]
+            + h * t * s * (s * slopes[im + lo] - t * slopes[im + hi]))
+
+
+@njit(cache=True, error_model='numpy')
+def position_friction_dfc(x, knots, values, slopes):
+    """Return ``dfc(x)`` [N] at each position of the array ``x`` [m] (see :func:`spline_sum`).
+
+    Parameters
+    ----------
+    x : ndarray
+        Positions [m].
+    knots, values, slopes : ndarray
+        Knot positions [m] (strictly increasing), values [N] and slopes [N/m].
+    """
+    out = np.empty(x.shape[0])
+    n = knots.shape[0]
+    for i in range(x.shape[0]):
+        out[i] = spline_sum(x[i], knots, 0, values, 0, slopes, 0, n)
+    return out
+
+
+def slope_matrix(knots: np.ndarray) -> np.ndarray:
+    """Return ``S`` (n × n) with the knot slopes of the clamped spline ``m = S·dfc`` [1/m].
+
+    Column ``j`` holds the slopes of the spline through the unit values ``e_j``
+    (:class:`scipy.interpolate.CubicSpline`, ``bc_type='clamped'``: zero end slopes).
+    """
+    # imported here: scipy.interpolate costs every `motor-comp` start ~0.25 s of CPU,
+    # and only a model with this effect needs it
+    from scipy.interpolate import CubicSpline
+    knots = np.asarray(knots, dtype=float)
+    n = knots.shape[0]
+    S = CubicSpline(knots, np.eye(n), bc_type='clamped', axis=0)(knots, 1)
+    S[0] = S[-1] = 0.0   # the boundary condition itself (the solve leaves ~1e-13 there)
+    return S
+
+
+@dataclasses.dataclass(frozen=True)
+class PositionFriction(Effect):
+    """Dry friction whose level varies along the travel (tight spots, wear).
+
+    Parameters
+    ----------
+    x : tuple of float
+        Knot positions [m], strictly increasing, 2..32 of them.
+    dfc : tuple of float
+        Change of the dry-friction level at each knot [N] (added to ``coulomb.fc`` and
+        ``stribeck.fs``), one per knot.  Between knots a clamped cubic spline, beyond
+        the end knots the end value.
+    """
+
+    name = 'position_friction'
+    title = 'position-dependent friction'
+    x: tuple
+    dfc: tuple
+
+    def __post_init__(self) -> None:
+        knots = _numbers('position_friction.x', 'm', self.x)
+        values = _numbers('position_friction.dfc', 'N', self.dfc)
+        if not 2 <= len(knots) <= MAX_KNOTS:
+            raise ParameterError(f'position_friction.x [m] must have 2..{MAX_KNOTS} knots, '
+                                 f'got {len(knots)}')
+        if len(values) != len(knots):
+            raise ParameterError(f'position_friction.dfc has {len(values)} values but x has '
+                                 f'{len(knots)} knots')
+        for i in range(1, len(knots)):
+            if not knots[i] > knots[i - 1]:
+                raise ParameterError(
+                    f'position_friction.x [m] must be strictly increasing, but x[{i}] = '
+                    f'{knots[i]:g} <= x[{i - 1}] = {knots[i - 1]:g}')
+            if not knots[i] - knots[i - 1] >= MIN_SPACING:
+                raise ParameterError(
+                    f'position_friction.x [m]: knots x[{i - 1}] and x[{i}] are closer than '
+                    f'{MIN_SPACING:g} m')
+        for i, xk in enumerate(knots):
+            if abs(xk) > MAX_POSITION:
+                raise ParameterError(f'position_friction.x[{i}] [m] must lie within '
+                                     f'±{MAX_POSITION:g}, got {xk:g}')
+        for i, yk in enumerate(values):
+            if abs(yk) > MAX_LEVEL:
+                raise ParameterError(f'position_friction.dfc[{i}] [N] must lie within '
+                                     f'±{MAX_LEVEL:g}, got {yk:g}')
+        object.__setattr__(self, 'x', knots)
+        object.__setattr__(self, 'dfc', values)
+        try:
+            slopes = slope_matrix(np.array(knots)) @ np.array(values)
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+            slopes = np.array([np.nan])
+        if not np.all(np.isfinite(slopes)):   # not reached within the bounds above
+            raise ParameterError('position_friction: no finite spline through these knots')
+        slopes.setflags(write=False)
+        # derived, not a field: equality, the model file and replace() see x and dfc only
+        object.__setattr__(self, '_slopes', slopes)
+
+    @property
+    def knots(self) -> np.ndarray:
+        """Knot positions [m]."""
+        return np.array(self.x)
+
+    @property
+    def values(self) -> np.ndarray:
+        """Level change at the knots [N]."""
+        return np.array(self.dfc)
+
+    @property
+    def slopes(self) -> np.ndarray:
+        """Slope of ``dfc`` at each knot [N/m] (zero at both end knots)."""
+        return self._slopes  # type: ignore[attr-defined]
+
+    @property
+    def span(self) -> tuple[float, float]:
+        """First and last knot [m]."""
+        return self.x[0], self.x[-1]
+
+    def level(self, x: np.ndarray) -> np.ndarray:
+        """Change of the dry-friction level ``dfc(x)`` [N] at positions ``x`` [m]."""
+        x = np.ascontiguousarray(np.atleast_1d(np.asarray(x, dtype=float)))
+        return position_friction_dfc(x, self.knots, self.values, self.slopes)
+
+    def force(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Extra friction force ``dfc(x)·sgn(v)`` [N] at positions [m] and velocities [m/s]."""
+        x = np.asarray(x, dtype=float)
+        v = np.asarray(v, dtype=float)
+        return self.level(x.ravel()).reshape(np.shape(x)) * np.sign(v)
+
+    def basis(self, x: np.ndarray) -> np.ndarray:
+        """Return the spline's basis functions ``b_j`` at ``x``: ``dfc(x) = B @ dfc``.
+
+        ``B`` has one row per position and one column per knot (n × n_knots).
+        Column ``j`` is the spline through the unit values ``e_j`` (same knots, same
+        clamped ends, constant beyond them): the identification's columns for the
+        knot values.  The columns sum to 1 at every ``x`` (a constant ``dfc`` is a
+        Coulomb level).
+
+        Parameters
+        ----------
+        x : ndarray
+            Positions [m], any shape (flattened).
+        """
+        x = np.asarray(x, dtype=float).ravel()
+        knots = self.knots
+        n = knots.shape[0]
+        slopes = slope_matrix(knots)
+        xc = np.clip(x, knots[0], knots[-1])
+        lo = np.clip(np.searchsorted(knots, xc, side='right') - 1, 0, n - 2)
+        hi = lo + 1
+        h = knots[hi] - knots[lo]
+        t = (xc - knots[lo]) / h
+        s = 1.0 - t
+        rows = np.arange(x.shape[0])
+        out = np.zeros((x.shape[0], n))
+        # the Hermite weights of spline_sum: the values at lo/hi and, through the
+        # slopes m = S·dfc, every knot value
+        np.add.at(out, (rows, lo), (1.0 + 2.0 * t) * s * s)
+        np.add.at(out, (rows, hi), t * t * (3.0 - 2.0 * t))
+        out += (h * t * s * s)[:, None] * slopes[lo] - (h * t * t * s)[:, None] * slopes[hi]
+        return out
+
+    def regressors(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Columns ``b_j(x)·sgn(v)``; coefficients ``dfc_j`` [N]."""
+        return self.basis(x) * np.sign(np.asarray(v, dtype=float).ravel())[:, None]
+
+    @property
+    def lowest(self) -> tuple[float, float]:
+        """Return ``(x, dfc(x))`` at the minimum of ``dfc`` over the knots' span [m, N].
+
+        The candidates are the knots and the interior stationary points of each cubic
+        (roots of the spline's derivative, :meth:`scipy.interpolate.PPoly.roots`); the
+        values there come from this module's own law.
+        """
+        from scipy.interpolate import CubicSpline   # see slope_matrix
+        cs = CubicSpline(self.knots, self.values, bc_type='clamped')
+        crit = cs.derivative().roots(extrapolate=False)
+        lo, hi = self.span
+        cand = np.concatenate([self.knots, crit[(crit > lo) & (crit < hi)]])
+        vals = self.level(cand)
+        i = int(np.argmin(vals))
+        return float(cand[i]), float(vals[i])
+
+    def params(self) -> dict[str, Any]:
+        """Parameters in model-file form: ``{x: [m...], dfc: [N...]}``."""
+        return {'x': [float(v) for v in self.x], 'dfc': [float(v) for v in self.dfc]}
+
+
+def _numbers(key: str, unit: str, seq: Any) -> tuple[float, ...]:
+    """Return ``seq`` as a tuple of finite floats or raise a one-line ParameterError."""
+    if isinstance(seq, (str, bytes)) or not hasattr(seq, '__iter__'):
+        raise ParameterError(f'{key} [{unit}] must be a list of numbers')
+    return tuple(check_finite(f'{key}[{i}] [{unit}]', v) for i, v in enumerate(seq))
