@@ -59,7 +59,8 @@ not an estimate of the Stribeck force, so the Stribeck excess stays in the
 compensation; it only leaves the robust term less to cover.  Its first ripple harmonic
 is its own only when the model's period equals the law's within
 :data:`RIPPLE_PERIOD_MATCH`; otherwise the law's regressor cannot represent the model's
-ripple.)
+ripple.  In every row, the rise of the dry level by load- and position-dependent
+friction stays in the compensation: the carried terms are at the base level, below.)
 
 **Load- and position-dependent friction** (``load_friction``, ``position_friction``;
 issue 23) raise the model's dry-friction level by ``Δ = dfc(r) + mu·|F_in|`` [N], as
@@ -570,6 +571,8 @@ class Carried:
                if has & {'coulomb', 'stribeck', 'presliding'} else '',
                CarriedDry.ALL: 'dry friction'
                if has & {'coulomb', 'stribeck', 'presliding'} else ''}.get(self.dry, '')
+        if dry and has & {'load_friction', 'position_friction'}:
+            dry += ' at its base level'      # the load/position rise stays compensated
         if dry:
             out.append(dry)
         if self.viscous and 'viscous' in has:

@@ -173,6 +173,10 @@ def test_carried_terms_leave_the_shift_in(ballscrew, gms, mode, ff):
     comp = cm.from_model(model)
     ctrl.set_compensation(comp)
     carried = ctrl.carried
+    dry_name = {'none': None, 'static': 'sliding friction curve', 'gms': 'dry friction',
+                'static+gms': 'dry friction'}[ff] if mode != 'adaptive_sliding' else 'coulomb'
+    if dry_name is not None:    # what the law carries is said to be the base level only
+        assert f'{dry_name} at its base level' in carried.names(comp)
     t = np.arange(N) * T
     r = 0.01 * np.sin(2 * np.pi * 1.5 * t) + 0.002 * np.sin(2 * np.pi * 7.0 * t)
     rv = np.concatenate([[0.0], np.diff(r) / T])
