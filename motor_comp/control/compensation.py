@@ -324,10 +324,11 @@ def _gms_drive_force(Q, qb, C, cb, rv, dx, dt, f_rest, shift, f0):
     """Drive force [N] that the GMS elements at the load-raised level balance.
 
     The root of ``φ(F) = F − f_rest − D(shift + mu·|F|)`` (:func:`_load_residual`), ``D``
-    the elements' force after the step at that level.  ``D`` is bounded in the level
-    (a slipping element moves from its force towards ``α_i·s`` by at most
-    ``α_i·C·dt``, a sticking one holds its spring force), so ``φ`` changes sign: from
-    ``f0`` [N] (the sliding closed form) the search steps the way ``φ`` says, doubling
+    the elements' force after the step at that level.  ``D`` stays bounded however high
+    the level (a slipping element moves towards ``α_i·s`` by at most
+    ``(α_i + |F_i|/|s|)·C·dt``, a sticking one never beyond its spring force
+    ``F_i + k_i·Δx``), so ``φ`` changes sign: from ``f0`` [N] (the sliding closed form)
+    the search steps the way ``φ`` says, doubling
     the step until the sign changes, then narrows the bracket by the Illinois variant of
     regula falsi to rounding.  ``φ`` need not be monotone — the slip law relaxes at the
     rate ``C/|s(v)|``, so a raised level slows its own decay — and then the root found
