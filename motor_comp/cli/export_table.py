@@ -6,8 +6,10 @@ amperes, or newtons for a force-input drive), for a drive's anticogging / gravit
 for ``motor-comp simulate --compensation-table`` and ``controller_node``'s
 ``compensation_table``.  A periodic part covers one period (ripple) or one revolution
 (gravity, ripple with a whole number of cycles per revolution); a non-periodic one
-(spring) needs the travel ``--range MIN MAX``.  The CSV header states the units, the
+(spline) needs the travel ``--range MIN MAX``.  The CSV header states the units, the
 period and the model it came from (:func:`motor_comp.control.compensation.write_table`).
+``position_friction`` is position-dependent but acts against the motion; a table cannot
+hold it, and the output names it with the reason (JSON ``left_out``).
 """
 from __future__ import annotations
 
@@ -64,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
     info = {'path': str(out), 'points': len(table.position), 'period': table.period,
             'effects': list(table.effects), 'units': dict(u),
             'input_gain': table.input_gain, 'peak_force': amp,
-            'peak_command': amp / table.input_gain, 'source_model': args.model}
+            'peak_command': amp / table.input_gain, 'source_model': args.model,
+            'left_out': dict(table.left_out)}
     if args.json:
         print(json.dumps(jsonable(info), allow_nan=False))
         return 0
@@ -73,8 +76,10 @@ def run(args: argparse.Namespace) -> int:
     print(f'{out}: {len(table.position)} points over {span}; '
           f'{" + ".join(table.effects)}; peak {amp:.4g} {u["force"]} = '
           f'{amp / table.input_gain:.4g} {u["command"]}')
-    not_in = [n for n in model.names if n not in table.effects]
+    not_in = [n for n in model.names if n not in table.effects and n not in table.left_out]
     if not_in:
         print(f'  not position-dependent (not in the table): {", ".join(not_in)}')
+    for name, why in table.left_out.items():
+        print(f'  {name} not in the table: {why}')
     sys.stdout.flush()
     return 0

@@ -59,7 +59,40 @@ not an estimate of the Stribeck force, so the Stribeck excess stays in the
 compensation; it only leaves the robust term less to cover.  Its first ripple harmonic
 is its own only when the model's period equals the law's within
 :data:`RIPPLE_PERIOD_MATCH`; otherwise the law's regressor cannot represent the model's
-ripple.)
+ripple.  In every row, the rise of the dry level by load- and position-dependent
+friction stays in the compensation: the carried terms are at the base level, below.)
+
+**Load- and position-dependent friction** (``load_friction``, ``position_friction``;
+issue 23) raise the model's dry-friction level by ``Δ = dfc(r) + mu·|F_in|`` [N], as
+the plant kernel does (:func:`~motor_comp.physics.kernel.level_shift`): the Coulomb and
+the break-away level alike, ``s(ṙ) → sgn(ṙ)·[fc + Δ + (fs − fc)·e^{−|ṙ/vs|^δ}]``.  With
+``presliding`` the elements carry the level, and the shift enters where the plant puts
+it: in the curve ``s(v)`` the elements slip at and relax towards (``α_i·s``), **shifted,
+not scaled** — the element forces are never multiplied by ``(level + Δ)/level``.  Why:
+while an element sticks it is a spring ``k_i·z_i`` whose stiffness no friction level
+changes, so scaling the element forces would also scale the pre-sliding stiffness (and
+the hysteresis after every reversal) by the level ratio, a law the plant does not
+have; shifting the curve leaves the sticking springs alone and moves only the slip
+limit and the sliding level, exactly as
+:func:`~motor_comp.physics.effects.presliding.gms_trajectory_shifted` and the kernel do,
+so in steady sliding the elements converge to ``s(v) + Δ·sgn v``.
+
+``F_in`` is the model's drive force at the reference, its inverse dynamics
+``M·r̈ + Σ F_k`` (every effect, inertia included) — with ``full`` and ``effects`` terms
+alike, and whatever the controller carries: the screw's friction sees the force the
+drive transmits, whichever part of the command (feedback, the law's own estimates or
+this feedforward) produces it.  ``F_in`` appears on both sides (the friction grows with
+the force that must overcome it), so it is solved: for the static curve in closed form
+by :func:`~motor_comp.physics.effects.load_friction.load_friction_drive_force` (the
+effect module's inverse); with GMS elements, whose force depends on the level through
+the slip law's relaxation ``e^{−C·dt/|s(v)|}`` (no closed form), by a bracketing root
+search on trial copies of the element state (:func:`_gms_drive_force`), started from
+that closed form and converged to rounding.  The sum of the two shifts is ``Δ``; the
+elements are then stepped once at that level.  A controller that carries dry friction
+(its friction feedforward, the adaptive law's ``fc·sgn ẋ_d``) knows no shift: the
+compensation removes the model's value of the carried term at the *unshifted* level,
+so ``Δ·sgn ṙ`` (with GMS: the shifted elements less a second set of the model's
+elements at the unshifted level) stays in the feedforward.
 
 One implementation of each law: the forces are the effect modules' own compiled laws —
 sliding friction (Coulomb + Stribeck + viscous, and the GMS elements) through
@@ -68,21 +101,27 @@ sliding friction (Coulomb + Stribeck + viscous, and the GMS elements) through
 :func:`~motor_comp.physics.effects.presliding.gms_step`;
 :func:`~motor_comp.physics.effects.asymmetry.asymmetry_force`,
 :func:`~motor_comp.physics.effects.ripple.ripple_sum`,
-:func:`~motor_comp.physics.effects.gravity.gravity_torque`; the offset and spring laws
-``f0`` and ``k·(x − x0)`` are read exactly as the plant kernel reads them.  The same
-compiled step runs in the in-process simulator and in ``controller_node`` (it is part of
-:func:`~motor_comp.control.controller.controller_step`).
+:func:`~motor_comp.physics.effects.gravity.gravity_torque`,
+:func:`~motor_comp.physics.effects.position_friction.spline_sum` (``dfc``),
+:func:`~motor_comp.physics.effects.load_friction.load_friction_level` and
+:func:`~motor_comp.physics.effects.load_friction.load_friction_drive_force`; the offset
+and spring laws ``f0`` and ``k·(x − x0)`` are read exactly as the plant kernel reads
+them.  The same compiled step runs in the in-process simulator and in
+``controller_node`` (it is part of :func:`~motor_comp.control.controller.controller_step`).
 
 Effects a force feedforward cannot cancel are reported with the reason
-(:data:`NOT_COMPENSABLE`): ``backlash`` (a gap in position, not a force).  An effect of
-the vocabulary without a feedforward law here yet (the friction effects
-``load_friction``, ``position_friction``: their level enters :func:`_dry_friction`) is
-reported as not compensated, never dropped silently.
+(:data:`NOT_COMPENSABLE`): ``backlash`` (a gap in position, not a force).  Every other
+effect of the vocabulary is compensated (:data:`COMPENSABLE`).
 
 A **position table** (``motor-comp export-table``) holds the position-dependent part
 only — ripple/cogging, gravity, spring, offset — over one period (or revolution) when
 the part is periodic; the controller interpolates it linearly (periodically wrapped, or
 clamped to its ends).  A table has no mass: its terms are its positions' forces.
+``position_friction`` is not in it (:data:`TABLE_LEFT_OUT`): its force ``dfc(x)·sgn ẋ``
+acts against the motion, so it is not a function of position alone; a table adds its
+force whichever way the axis moves, and a tabulated ``dfc(x)`` would cancel the tight
+spot going one way and double it coming back.  The model compensation, which knows the
+reference's direction, carries it.
 
 Packed layout.  The compensation travels inside the controller's packed vectors so the
 compiled step stays one function: parameters ``Q[qb:]`` (after the controller's own
@@ -108,8 +147,12 @@ from motor_comp.errors import InputFileError, ModelFileError, ParameterError, ch
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects.asymmetry import asymmetry_force
 from motor_comp.physics.effects.gravity import gravity_torque
-from motor_comp.physics.effects.presliding import MAX_ELEMENTS
+from motor_comp.physics.effects.load_friction import (load_friction_drive_force,
+                                                      load_friction_level)
+from motor_comp.physics.effects.position_friction import MAX_KNOTS, spline_sum
+from motor_comp.physics.effects.presliding import MAX_ELEMENTS, gms_step
 from motor_comp.physics.effects.ripple import MAX_HARMONICS, ripple_sum
+from motor_comp.physics.effects.stribeck import stribeck_curve, stribeck_level
 
 #: effects a force feedforward cannot cancel, with the reason shown to the user
 NOT_COMPENSABLE: dict[str, str] = {
@@ -118,14 +161,22 @@ NOT_COMPENSABLE: dict[str, str] = {
 }
 #: effects the feedforward cancels (``delay`` by sending the feedforward τ earlier)
 COMPENSABLE = ('coulomb', 'viscous', 'stribeck', 'presliding', 'ripple', 'offset',
-               'spring', 'asymmetry', 'gravity', 'delay')
-#: friction effects of the vocabulary that have no feedforward law here yet (the place
-#: for them is :func:`_dry_friction`: both change the dry-friction level)
-NO_LAW_YET = 'no feedforward law for this friction effect yet'
+               'spring', 'asymmetry', 'gravity', 'delay', 'load_friction',
+               'position_friction')
 #: the position-dependent effects a position table holds
 POSITION_EFFECTS = ('ripple', 'gravity', 'spring', 'offset')
+#: effects that depend on position but that a position table cannot hold, with the reason
+TABLE_LEFT_OUT: dict[str, str] = {
+    'position_friction': 'its force dfc(x)·sgn(v) acts against the motion, so it is not a '
+                         'function of position alone (a table would cancel it one way and '
+                         'double it the other); the model compensation carries it',
+}
 #: friction effects (the controller's own friction feedforward carries some of them)
-FRICTION_EFFECTS = ('coulomb', 'viscous', 'stribeck', 'presliding', 'asymmetry')
+FRICTION_EFFECTS = ('coulomb', 'viscous', 'stribeck', 'presliding', 'asymmetry',
+                    'load_friction', 'position_friction')
+#: trial evaluations of the GMS elements at most in each phase (bracketing, then
+#: Illinois) of the solve of the load-dependent level (:func:`_gms_drive_force`)
+LOAD_SOLVE_ITER = 60
 #: the adaptive law's first ripple harmonic is the model's when the periods agree this
 #: closely (relative): then over 50 periods of travel the phases part by < 0.16 rad
 RIPPLE_PERIOD_MATCH = 5e-4
@@ -188,7 +239,13 @@ K_TAU = K_F0 + 9                  # the model's dead time [s] (the reference is 
 # terms the controller carries (written by the controller from its mode/feedforward)
 K_CARRY_DRY, K_CARRY_VISC, K_CARRY_RIGID, K_CARRY_RIP1 = (K_F0 + 10, K_F0 + 11,
                                                           K_F0 + 12, K_F0 + 13)
-K_MODEL_SIZE = K_F0 + 14
+# load- and position-dependent friction (issue 23): mu [-]; knot count, knots [m],
+# values [N] and spline slopes [N/m] of dfc (the plant kernel's P_LF_MU, P_PF_*)
+K_LF_MU, K_PF_N = K_F0 + 14, K_F0 + 15
+K_PF_X = K_PF_N + 1
+K_PF_Y = K_PF_X + MAX_KNOTS
+K_PF_M = K_PF_Y + MAX_KNOTS
+K_MODEL_SIZE = K_PF_M + MAX_KNOTS
 # table: n points, period (0 = not periodic), then n positions and n forces
 K_TAB_N, K_TAB_PERIOD, K_TAB_X = 2, 3, 4
 
@@ -197,7 +254,13 @@ CS_F, CS_U = 0, 1                      # last force [N] and command [V] of the c
 CS_STARTED, CS_RE = 2, 3               # evaluated once; last evaluated position [m]
 CS_GMS_F = 4
 CS_GMS_SLIP = CS_GMS_F + MAX_ELEMENTS
-CS_SIZE = CS_GMS_SLIP + MAX_ELEMENTS
+# with a level shift: the model's elements at the unshifted level (the value of what a
+# GMS friction feedforward carries), and trial copies for the solve of the load level
+CS_GMS_F0 = CS_GMS_SLIP + MAX_ELEMENTS
+CS_GMS_SLIP0 = CS_GMS_F0 + MAX_ELEMENTS
+CS_GMS_TF = CS_GMS_SLIP0 + MAX_ELEMENTS
+CS_GMS_TS = CS_GMS_TF + MAX_ELEMENTS
+CS_SIZE = CS_GMS_TS + MAX_ELEMENTS
 
 
 @njit(**JIT_INLINE)
@@ -231,7 +294,108 @@ def _table_force(Q, qb, x):
 
 
 @njit(**JIT_INLINE)
-def _dry_friction(Q, qb, C, cb, rv, dx, dt):
+def _gms_trial(Q, qb, C, cb, rv, dx, dt, level):
+    """GMS force [N] of the next step with the dry level raised by ``level`` [N].
+
+    The element law :func:`~motor_comp.physics.effects.presliding.gms_step` applied to
+    copies of the element state (``CS_GMS_TF``/``CS_GMS_TS``), so the elements are not
+    stepped: the trial of one level in the solve of :func:`_load_level`.  The same
+    arithmetic as the real step in :func:`friction_feedforward` (``s(ṙ)`` with
+    ``fc + level``, ``fs + level``), so the solved force is the stepped one.
+    """
+    n = int(Q[qb + K_GMS_N])
+    for i in range(n):
+        C[cb + CS_GMS_TF + i] = C[cb + CS_GMS_F + i]
+        C[cb + CS_GMS_TS + i] = C[cb + CS_GMS_SLIP + i]
+    s_v = stribeck_curve(rv, Q[qb + K_FC] + level, Q[qb + K_FS] + level, Q[qb + K_VS],
+                         Q[qb + K_DELTA])
+    return gms_step(C, cb + CS_GMS_TF, C, cb + CS_GMS_TS, Q, qb + K_GMS_ALPHA, Q,
+                    qb + K_GMS_K, Q, qb + K_GMS_SIGMA, n, Q[qb + K_GMS_C], dt, dx, rv, s_v)
+
+
+@njit(**JIT_INLINE)
+def _load_residual(Q, qb, C, cb, rv, dx, dt, f_rest, shift, mu, f):
+    """Residual ``φ(F) = F − f_rest − D(shift + mu·|F|)`` [N] of a trial drive force ``F``."""
+    return f - f_rest - _gms_trial(Q, qb, C, cb, rv, dx, dt, shift + load_friction_level(f, mu))
+
+
+@njit(**JIT_OPTIONS)
+def _gms_drive_force(Q, qb, C, cb, rv, dx, dt, f_rest, shift, f0):
+    """Drive force [N] that the GMS elements at the load-raised level balance.
+
+    The root of ``φ(F) = F − f_rest − D(shift + mu·|F|)`` (:func:`_load_residual`), ``D``
+    the elements' force after the step at that level.  ``D`` stays bounded however high
+    the level (a slipping element moves towards ``α_i·s`` by at most
+    ``(α_i + |F_i|/|s|)·C·dt``, a sticking one never beyond its spring force
+    ``F_i + k_i·Δx``), so ``φ`` changes sign: from ``f0`` [N] (the sliding closed form)
+    the search steps the way ``φ`` says, doubling
+    the step until the sign changes, then narrows the bracket by the Illinois variant of
+    regula falsi to rounding.  ``φ`` need not be monotone — the slip law relaxes at the
+    rate ``C/|s(v)|``, so a raised level slows its own decay — and then the root found
+    is the first sign change from the sliding value.  Not inlined: it runs only for a
+    model with both GMS elements and ``load_friction``.
+    """
+    mu = Q[qb + K_LF_MU]
+    fa = f0
+    pa = _load_residual(Q, qb, C, cb, rv, dx, dt, f_rest, shift, mu, fa)
+    tol = 2e-15 * (abs(f0) + abs(f_rest) + abs(shift) + Q[qb + K_FS])
+    if abs(pa) <= tol:
+        return fa
+    step = abs(pa)
+    fb = fa - pa                     # a fixed-point step: D at the level of fa
+    pb = _load_residual(Q, qb, C, cb, rv, dx, dt, f_rest, shift, mu, fb)
+    for _ in range(LOAD_SOLVE_ITER):  # same sign: φ ≥ F − f_rest − max|D| grows beyond
+        if (pa < 0.0) != (pb < 0.0) or pb == 0.0:
+            break
+        fa, pa = fb, pb
+        step *= 2.0
+        fb = fa + step if pa < 0.0 else fa - step
+        pb = _load_residual(Q, qb, C, cb, rv, dx, dt, f_rest, shift, mu, fb)
+    best_f, best_p = (fb, pb) if abs(pb) <= abs(pa) else (fa, pa)
+    side = 0
+    for _ in range(LOAD_SOLVE_ITER):
+        if abs(best_p) <= tol or pa == pb:
+            break
+        fc_ = (fa * pb - fb * pa) / (pb - pa)
+        if not (min(fa, fb) < fc_ < max(fa, fb)):   # the bracket is down to rounding
+            break
+        pc = _load_residual(Q, qb, C, cb, rv, dx, dt, f_rest, shift, mu, fc_)
+        if abs(pc) < abs(best_p):
+            best_f, best_p = fc_, pc
+        if (pc < 0.0) == (pb < 0.0):   # c replaces b; twice in a row: halve φ(a)
+            if side == -1:
+                pa *= 0.5
+            side = -1
+        else:                          # the sign changed between b and c: a ← b
+            fa, pa = fb, pb
+            side = 1
+        fb, pb = fc_, pc
+    return best_f
+
+
+@njit(**JIT_INLINE)
+def _load_level(Q, qb, C, cb, rv, dx, dt, f_rest, shift):
+    """Load-friction level ``mu·|F_in|`` [N] of the model's drive force at the reference.
+
+    ``F_in`` solves the inverse dynamics with the dry friction ``D`` at the level raised
+    by ``shift + mu·|F_in|`` (``shift`` [N] the position-dependent part ``dfc(r)``):
+    ``F_in = f_rest + D(shift + mu·|F_in|)``, ``f_rest`` [N] the rest of it (inertia,
+    viscous and position terms, asymmetry).  Static curve:
+    ``D = sgn(ṙ)·(s-level + shift + mu·|F_in|)``, solved in closed form by
+    :func:`load_friction_drive_force`; GMS elements: :func:`_gms_drive_force`, from that
+    closed form.
+    """
+    mu = Q[qb + K_LF_MU]
+    fc, fs, vs, delta = Q[qb + K_FC], Q[qb + K_FS], Q[qb + K_VS], Q[qb + K_DELTA]
+    level = stribeck_level(abs(rv), fc, fs, 1.0 / vs, delta) + shift
+    f_in = load_friction_drive_force(f_rest, np.sign(rv), level, mu)
+    if int(Q[qb + K_GMS_N]) > 0:
+        f_in = _gms_drive_force(Q, qb, C, cb, rv, dx, dt, f_rest, shift, f_in)
+    return load_friction_level(f_in, mu)
+
+
+@njit(**JIT_INLINE)
+def _dry_friction(Q, qb, C, cb, r, rv, dx, dt, f_rest):
     """Dry and viscous friction [N] the compensation adds, less what the law carries.
 
     The model's dry friction is its GMS elements (when it has ``presliding``: they carry
@@ -240,29 +404,48 @@ def _dry_friction(Q, qb, C, cb, rv, dx, dt):
     the model's own value of the terms the controller carries (module table).  The GMS
     elements are stepped every call, carried or not, so a switch is bumpless.
 
-    New friction effects change the dry level ``fc`` (and ``fs``) here, before
-    :func:`friction_feedforward` is called: ``load_friction`` by ``mu·|F_in|`` with
-    ``F_in`` the rest of the inverse-dynamics force, ``position_friction`` by
-    ``dfc(r)``.
+    Load- and position-dependent friction raise the dry level ``fc`` and ``fs`` by
+    ``Δ = dfc(r) + mu·|F_in|`` before :func:`friction_feedforward` is called (module
+    docstring): ``dfc`` from the model's spline at the evaluated position ``r``,
+    ``mu·|F_in|`` from :func:`_load_level` with ``f_rest`` [N], the model's drive force
+    less its dry friction.  The carried terms are removed at the unshifted level (a
+    second set of elements, ``CS_GMS_F0``, when the model has GMS), so the shift stays.
     """
     mode = int(Q[qb + K_FRIC])
     if mode == 0:
         return 0.0
     fc, fs, vs, delta, fv = (Q[qb + K_FC], Q[qb + K_FS], Q[qb + K_VS], Q[qb + K_DELTA],
                              Q[qb + K_FV])
+    n = int(Q[qb + K_GMS_N])
+    npf = int(Q[qb + K_PF_N])
+    shifted = npf > 0 or Q[qb + K_LF_MU] != 0.0
+    shift = 0.0
+    if npf > 0:
+        shift = spline_sum(r, Q, qb + K_PF_X, Q, qb + K_PF_Y, Q, qb + K_PF_M, npf)
+    if Q[qb + K_LF_MU] != 0.0:
+        shift += _load_level(Q, qb, C, cb, rv, dx, dt, f_rest, shift)
     _, f_static, f_el = friction_feedforward(
-        mode, rv, dx, dt, fc, fs, vs, delta, fv, C, cb + CS_GMS_F, cb + CS_GMS_SLIP, Q,
-        qb + K_GMS_ALPHA, qb + K_GMS_K, qb + K_GMS_SIGMA, int(Q[qb + K_GMS_N]),
+        mode, rv, dx, dt, fc + shift, fs + shift, vs, delta, fv, C, cb + CS_GMS_F,
+        cb + CS_GMS_SLIP, Q, qb + K_GMS_ALPHA, qb + K_GMS_K, qb + K_GMS_SIGMA, n,
         Q[qb + K_GMS_C])
     curve = f_static - fv * rv            # s(ṙ), the static curve without viscous
-    dry = f_el if int(Q[qb + K_GMS_N]) > 0 else curve
+    dry = f_el if n > 0 else curve
+    # the model's value of what a controller carries: at the level without the shift
+    curve0, f_el0 = curve, f_el
+    if shifted:
+        curve0 = stribeck_curve(rv, fc, fs, vs, delta)
+        f_el0 = curve0
+        if n > 0:
+            f_el0 = gms_step(C, cb + CS_GMS_F0, C, cb + CS_GMS_SLIP0, Q, qb + K_GMS_ALPHA,
+                             Q, qb + K_GMS_K, Q, qb + K_GMS_SIGMA, n, Q[qb + K_GMS_C], dt,
+                             dx, rv, curve0)
     carried = int(Q[qb + K_CARRY_DRY])
     if carried == 1:
         dry -= fc * np.sign(rv)
     elif carried == 2:
-        dry -= curve
+        dry -= curve0
     elif carried == 3:
-        dry = 0.0
+        dry -= f_el0 if n > 0 else curve0
     if Q[qb + K_CARRY_VISC] == 0.0:
         dry += fv * rv
     return dry
@@ -299,20 +482,26 @@ def compensation_force(Q, qb, C, cb, r, rv, ra, dt):
     dx = r - C[cb + CS_RE] if C[cb + CS_STARTED] > 0.0 else 0.0
     C[cb + CS_STARTED] = 1.0
     C[cb + CS_RE] = r
-    f = _dry_friction(Q, qb, C, cb, rv, dx, dt)
+    # the model's forces that do not depend on the dry level, all of them (the load
+    # level needs the whole drive force); what the controller carries is removed below
+    f_pos = 0.0
     if Q[qb + K_DFC] != 0.0 or Q[qb + K_DFV] != 0.0:
-        f += asymmetry_force(rv, Q[qb + K_DFC], Q[qb + K_DFV])
+        f_pos += asymmetry_force(rv, Q[qb + K_DFC], Q[qb + K_DFV])
+    carried_rip = 0.0
     nh = int(Q[qb + K_RIP_NH])
     if nh > 0:
-        f += ripple_sum(r, Q[qb + K_RIP_PERIOD], Q, qb + K_RIP_A, Q, qb + K_RIP_B, nh)
+        f_pos += ripple_sum(r, Q[qb + K_RIP_PERIOD], Q, qb + K_RIP_A, Q, qb + K_RIP_B, nh)
         if Q[qb + K_CARRY_RIP1] != 0.0:   # the adaptive law's own first harmonic
             th = 2.0 * np.pi / Q[qb + K_RIP_PERIOD] * r
-            f -= Q[qb + K_RIP_A] * np.sin(th) + Q[qb + K_RIP_B] * np.cos(th)
-    f += Q[qb + K_F0] + Q[qb + K_SPRING_K] * (r - Q[qb + K_SPRING_X0])
+            carried_rip = Q[qb + K_RIP_A] * np.sin(th) + Q[qb + K_RIP_B] * np.cos(th)
+    f_pos += Q[qb + K_F0] + Q[qb + K_SPRING_K] * (r - Q[qb + K_SPRING_X0])
     if Q[qb + K_GRAV_MGL] != 0.0:
-        f += gravity_torque(r, Q[qb + K_GRAV_MGL], Q[qb + K_GRAV_Q0])
+        f_pos += gravity_torque(r, Q[qb + K_GRAV_MGL], Q[qb + K_GRAV_Q0])
+    rigid = Q[qb + K_MASS] * ra
+    f = _dry_friction(Q, qb, C, cb, r, rv, dx, dt, rigid + Q[qb + K_FV] * rv + f_pos)
+    f += f_pos - carried_rip
     if Q[qb + K_FULL] != 0.0 and Q[qb + K_CARRY_RIGID] == 0.0:
-        f += Q[qb + K_MASS] * ra + Q[qb + K_DAMP] * rv
+        f += rigid + Q[qb + K_DAMP] * rv
     return f, rv
 
 
@@ -383,6 +572,8 @@ class Carried:
                if has & {'coulomb', 'stribeck', 'presliding'} else '',
                CarriedDry.ALL: 'dry friction'
                if has & {'coulomb', 'stribeck', 'presliding'} else ''}.get(self.dry, '')
+        if dry and has & {'load_friction', 'position_friction'}:
+            dry += ' at its base level'      # the load/position rise stays compensated
         if dry:
             out.append(dry)
         if self.viscous and 'viscous' in has:
@@ -530,7 +721,8 @@ def from_model(model: AxisModel, *, source: str = 'model',
     K[K_INVGAIN] = 1.0 / model.input_gain
     names = model.names
     gms = model.get('presliding')
-    if any(n in names for n in ('coulomb', 'stribeck', 'viscous', 'presliding')):
+    if any(n in names for n in ('coulomb', 'stribeck', 'viscous', 'presliding',
+                                'load_friction', 'position_friction')):
         K[K_FRIC] = 3.0 if gms is not None else 1.0
     fc, fs, vs, delta = model.stribeck_curve_params()
     K[K_FC], K[K_FS], K[K_VS], K[K_DELTA], K[K_FV] = fc, fs, vs, delta, model.fv
@@ -558,12 +750,21 @@ def from_model(model: AxisModel, *, source: str = 'model',
     grav = model.get('gravity')
     if grav is not None:
         K[K_GRAV_MGL], K[K_GRAV_Q0] = grav.mgl, grav.q0
+    lf = model.get('load_friction')
+    if lf is not None:
+        K[K_LF_MU] = lf.mu
+    pf = model.get('position_friction')
+    if pf is not None:
+        nk = len(pf.x)
+        K[K_PF_N] = nk
+        K[K_PF_X:K_PF_X + nk] = pf.knots
+        K[K_PF_Y:K_PF_Y + nk] = pf.values
+        K[K_PF_M:K_PF_M + nk] = pf.slopes
     K[K_FULL] = float(terms is CompensationTerms.FULL)
     K[K_MASS], K[K_DAMP], K[K_BEMF] = model.mass, model.damping, model.back_emf
     dly = model.get('delay')
     K[K_TAU] = dly.tau if dly is not None else 0.0
-    not_comp = {n: NOT_COMPENSABLE.get(n, NO_LAW_YET) for n in names
-                if n not in COMPENSABLE}
+    not_comp = {n: NOT_COMPENSABLE[n] for n in names if n not in COMPENSABLE}
     return Compensation(kind=CompensationKind.MODEL, source=source, packed=K,
                         input_gain=float(model.input_gain),
                         compensated=tuple(n for n in names if n in COMPENSABLE),
@@ -601,6 +802,9 @@ class PositionTable:
         The effects the table holds.
     source : str
         Model file.
+    left_out : Mapping[str, str]
+        Position-dependent effects of the model the table cannot hold, with the reason
+        (:data:`TABLE_LEFT_OUT`); empty for a table read from a file.
     """
 
     position: np.ndarray
@@ -611,6 +815,7 @@ class PositionTable:
     units: Mapping[str, str]
     effects: tuple
     source: str
+    left_out: Mapping[str, str] = dataclasses.field(default_factory=dict)
 
 
 _COMMAND_UNIT = {'voltage': 'V', 'current': 'A', 'force': 'N'}
@@ -641,6 +846,9 @@ def position_table(model: AxisModel, *, points: int = 1024,
                    source: str = 'model') -> PositionTable:
     """Tabulate the position-dependent effects of ``model`` (effects' own force laws).
 
+    ``position_friction`` is left out and named in :attr:`PositionTable.left_out`
+    (:data:`TABLE_LEFT_OUT`: it acts against the motion, module docstring).
+
     Parameters
     ----------
     points : int
@@ -654,9 +862,11 @@ def position_table(model: AxisModel, *, points: int = 1024,
     if not isinstance(points, (int, np.integer)) or isinstance(points, bool) or points < 2:
         raise ParameterError(f'--points must be an integer >= 2, got {points!r}')
     effects = tuple(n for n in model.names if n in POSITION_EFFECTS)
+    left_out = {n: TABLE_LEFT_OUT[n] for n in model.names if n in TABLE_LEFT_OUT}
     if not effects:
+        why = ''.join(f'; {n} is not tabulated: {r}' for n, r in left_out.items())
         raise ParameterError(f'{source}: the model has no position-dependent effect '
-                             f'({", ".join(POSITION_EFFECTS)}); nothing to tabulate')
+                             f'({", ".join(POSITION_EFFECTS)}); nothing to tabulate{why}')
     period = table_period(model)
     if span is not None:
         lo, hi = (float(s) for s in span)
@@ -677,7 +887,7 @@ def position_table(model: AxisModel, *, points: int = 1024,
     units['command'] = _COMMAND_UNIT[model.input.value]
     return PositionTable(position=x, force=f, command=f / model.input_gain, period=period,
                          input_gain=float(model.input_gain), units=units, effects=effects,
-                         source=source)
+                         source=source, left_out=left_out)
 
 
 def write_table(path: str | Path, table: PositionTable) -> None:
@@ -819,7 +1029,8 @@ def load(path: str | Path) -> Compensation:
     return load_model(path)
 
 
-__all__ = ['COMPENSABLE', 'NOT_COMPENSABLE', 'POSITION_EFFECTS', 'Carried', 'CarriedDry',
+__all__ = ['COMPENSABLE', 'NOT_COMPENSABLE', 'POSITION_EFFECTS', 'TABLE_LEFT_OUT', 'Carried',
+           'CarriedDry',
            'Compensation', 'CompensationKind', 'CompensationTerms', 'PositionTable',
            'compensation_command', 'compensation_force', 'from_model', 'from_table', 'load',
            'load_model', 'load_table', 'position_table', 'read_table', 'table_from_text',

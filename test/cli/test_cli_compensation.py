@@ -51,6 +51,11 @@ def models(tmp_path_factory):
     spring.save(d / 'spring.yaml')
     friction_only = AxisModel.from_dict({'mass': 5.4, 'effects': {'coulomb': {'fc': 3.0}}})
     friction_only.save(d / 'friction_only.yaml')
+    spots = make_effect('position_friction', {'x': [0.0, 0.01, 0.02], 'dfc': [0.0, 2.0, 0.0]})
+    cog.with_effect(spots).save(d / 'worn_cogging.yaml')
+    friction_only.with_effect(spots).save(d / 'spots_only.yaml')
+    true.with_effect(make_effect('load_friction', {'mu': 0.2})).with_effect(spots).save(
+        d / 'ballscrew_worn.yaml')
     (d / 'bad.yaml').write_text('mass: 1\neffects: {stribeck: {vs: 0}}\n')
     return d
 
@@ -106,6 +111,35 @@ def test_simulate_with_table(capsys, models, tmp_path):
     assert json.loads(out)['runs'][0]['compensation_kind'] == 'table'
 
 
+def test_simulate_compensates_the_new_friction_effects(capsys, models):
+    code, out, err = _cli(capsys, 'simulate', '--plant', 'ballscrew', '--controller', 'npid',
+                          '--duration', '0.5', '--compensation', models / 'ballscrew_worn.yaml',
+                          '--json')
+    assert code == 0, err
+    run = json.loads(out)['runs'][0]
+    assert run['compensated'] == ['coulomb', 'viscous', 'stribeck', 'presliding', 'delay',
+                                  'load_friction', 'position_friction']
+    assert run['not_compensated'] == {}
+
+
+def test_export_table_leaves_position_friction_out(capsys, models, tmp_path):
+    code, out, err = _cli(capsys, 'export-table', models / 'worn_cogging.yaml', '--points',
+                          '256', '-o', tmp_path / 'w.csv')
+    assert code == 0, err
+    assert 'position_friction not in the table: its force dfc(x)·sgn(v) acts against the ' \
+           'motion' in out
+    assert 'not position-dependent (not in the table): coulomb\n' in out
+    code, out, err = _cli(capsys, 'export-table', models / 'worn_cogging.yaml', '--points',
+                          '256', '-o', tmp_path / 'w2.csv', '--json')
+    info = json.loads(out)
+    assert info['effects'] == ['ripple', 'offset']
+    assert list(info['left_out']) == ['position_friction']
+    # the table is the cogging and the offset, the same as without the tight spot
+    x, f, _ = np.loadtxt(tmp_path / 'w2.csv', delimiter=',', comments='#', skiprows=7).T
+    cog = AxisModel.load(models / 'cogging.yaml')
+    np.testing.assert_allclose(f, cog.get('ripple').force(x) + 4.0, atol=1e-9)
+
+
 @pytest.mark.parametrize('argv, needles', [
     (['--compensation', '{d}/missing.yaml'], ['missing.yaml', 'no such model file']),
     (['--compensation', '{d}/bad.yaml'], ['bad.yaml', 'stribeck.vs']),
@@ -132,6 +166,9 @@ def test_simulate_compensation_bad_input(capsys, models, argv, needles):
     (['{d}/spring.yaml', '--range', '0.1', '-0.1', '-o', '{o}'], ['--range', 'MIN < MAX']),
     (['{d}/spring.yaml', '--range', '0', 'inf', '-o', '{o}'], ['--range', 'finite']),
     (['{d}/friction_only.yaml', '-o', '{o}'], ['no position-dependent effect']),
+    (['{d}/spots_only.yaml', '-o', '{o}'], ['no position-dependent effect',
+                                            'position_friction is not tabulated',
+                                            'against the motion']),
     (['{d}/missing.yaml', '-o', '{o}'], ['no such model file']),
     (['{d}/bad.yaml', '-o', '{o}'], ['stribeck.vs']),
     (['{d}/cogging.yaml', '-o', '{d}/no_dir/t.csv'], ['-o', 'does not exist']),
