@@ -48,6 +48,7 @@ class RunPart:
     kin: Kinematics
     rows: np.ndarray
     W: int
+    gms_scale: float = 1.0
 
 
 class Motion:
@@ -68,7 +69,7 @@ class Motion:
             elif name == 'v':
                 hit = proc.point_velocity(kin, self.position)
             elif name == 'xg':
-                hit = proc.gms_position(kin, self.position)
+                hit = proc.gms_position(kin, self.position, self.part.gms_scale)
             elif name == 'shares':
                 half = max(3, int(round(REVERSAL_HALF * kin.window)))
                 eps = max(kin.quantum(), kin.noise_std())
@@ -211,7 +212,7 @@ class Dataset:
             keep = np.zeros(len(kin), dtype=bool)
             keep[::step] = True
             rows = np.flatnonzero(mask & keep)
-            self.parts.append(RunPart(kin, rows, W))
+            self.parts.append(RunPart(kin, rows, W, processing.gms_scale))
             # independent samples: Σb² of the normalised kernel per sample
             n_full += len(rows) * step * float(np.sum(proc.kernel(W) ** 2))
             t = kin.t[rows] - kin.t[0]

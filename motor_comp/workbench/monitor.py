@@ -8,20 +8,25 @@ windowed force NRMSE ``RMS(r)/RMS(F_in − mean)`` (DESIGN.md §6) — the figur
 The level is OK / WARN / ERROR by two thresholds on the NRMSE.
 
 When the residual is large, a cheap on-line version of ``diagnose`` names the effect
-that would explain it: the residual is regressed, one candidate at a time, on the
-effects' own term columns (the same processing as the residual)
-— Coulomb, viscous, Stribeck (with the model's shape), offset, spring, ripple (at the
-model's period), mass — and the candidate removing the largest share of the residual,
-after a price per parameter (BIC-like, on the window's independent samples), is named.
-An effect the model already has is reported as *changed* (with the change of its
-level, e.g. ``fc +9.8 N``), an absent one as *missing*.  It is a screening, not a fit:
-no nonlinear search (period, Stribeck velocity, delay…), which ``motor-comp diagnose``
+that would explain it: the residual is regressed, one candidate at a
+time, on the columns of every force term of the library (the same processing and
+library as the residual; a term whose evidence needs other rows, on those) and on the
+mass, and the candidate removing the largest share of the residual, after a price per
+parameter (BIC-like, on the window's independent samples), is named.  A term the model
+has is screened at its own nonlinear parameters, another at the starts it declares
+(:meth:`~motor_comp.physics.effects.identification.Term.initial`, else the grid of
+its search space); a term the window cannot judge (an input or output effect, too few
+reversals, a needed term missing) is skipped with the reason.  An effect the model
+already has is reported as *changed* (with the change of its level, e.g. ``fc +9.8 N``),
+an absent one as *missing*.  It is a screening, not a fit: no local search of the
+nonlinear parameters (period, Stribeck velocity, delay…), which ``motor-comp diagnose``
 does offline.
 """
 from __future__ import annotations
 
 import dataclasses
 import enum
+import itertools
 import math
 
 import numpy as np
@@ -29,11 +34,13 @@ import numpy as np
 from motor_comp.errors import MotorCompError, ParameterError
 from motor_comp.logs.run import Run
 from motor_comp.physics.axis import AxisModel
-from motor_comp.physics.effects import TERMS, EffectKind
-from motor_comp.physics.effects.identification import Signal
+from motor_comp.physics.effects import EFFECTS, TERMS, EffectKind
+from motor_comp.physics.effects.identification import MASS, Signal, Summary, Term
 from motor_comp.workbench.dataset import Dataset
-from motor_comp.workbench.derivatives import kinematics
-from motor_comp.workbench.library import context, dataset_for, design, spec_of, theta_of
+from motor_comp.workbench.derivatives import Kinematics, kinematics
+from motor_comp.workbench.library import Design, Spec, context, dataset_for, design, \
+    processing_for, spec_of, theta_of, values_of
+from motor_comp.workbench.processing import Processing
 from motor_comp.workbench.session import default_hold
 
 
@@ -46,10 +53,8 @@ class Level(enum.IntEnum):
     STALE = 3
 
 
-TITLES = {'coulomb': 'Coulomb friction', 'viscous': 'viscous friction',
-          'stribeck': 'Stribeck friction', 'offset': 'constant force offset',
-          'spring': 'spring (position-proportional force)', 'ripple': 'force ripple',
-          'mass': 'mass/inertia'}
+#: the candidate that is no effect of the vocabulary
+MASS_TITLE = 'mass/inertia'
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,7 +81,8 @@ class Candidate:
     @property
     def title(self) -> str:
         """Human name, e.g. ``Coulomb friction``."""
-        return TITLES.get(self.effect, self.effect)
+        cls = EFFECTS.get(self.effect)
+        return cls.title if cls is not None else MASS_TITLE
 
     def sentence(self) -> str:
         """E.g. ``Coulomb friction changed (fc +9.8), explains 85 % of the residual``."""
@@ -105,6 +111,8 @@ class Health:
         The effect that would explain the residual (only when not OK).
     message : str
         One line for the diagnostic status.
+    unscreened : tuple of (str, str)
+        The library's effects the screen left out, with the reason (only when not OK).
     """
 
     level: Level
@@ -114,6 +122,7 @@ class Health:
     duration: float
     candidate: Candidate | None
     message: str
+    unscreened: tuple = ()
 
 
 def check_thresholds(warn: float, error: float) -> None:
@@ -123,54 +132,176 @@ def check_thresholds(warn: float, error: float) -> None:
                              f'got warn {warn:g}, error {error:g}')
 
 
-def _columns(model: AxisModel, data: Dataset) -> dict[str, tuple[np.ndarray, list]]:
-    """Return each screened candidate's columns at the rows (the one processing) and names.
+@dataclasses.dataclass(frozen=True)
+class _Residual:
+    """The model's force residual on one processing's rows, and what a screen needs of it."""
 
-    The terms without nonlinear parameters, the model's own nonlinear terms at their
-    parameters, a Stribeck curve at a tenth of the peak speed when the model has none,
-    and the mass.
+    data: Dataset
+    design: Design
+    r: np.ndarray
+    values: dict
+    x: np.ndarray
+
+
+def _residual(data: Dataset, spec: Spec, model: AxisModel) -> _Residual:
+    """Return ``model``'s residual on ``data`` (its own design, coefficients as given)."""
+    d = design(data, spec, model)
+    theta = theta_of(model, spec, d.ctx)
+    return _Residual(data, d, d.y - d.X @ theta, values_of(spec, d.labels, theta),
+                     d.view.gather(lambda p, mo: mo.x))
+
+
+def _unscreenable(name: str, t: Term, spec: Spec, s: Summary) -> str | None:
+    """Return why the window cannot screen term ``name`` against ``spec`` (None: it can).
+
+    Only the terms' declarations are read: where the effect acts, what the run must
+    show (:meth:`Term.applicable`) and what it needs beside it (``requires``,
+    ``requires_any``, ``excludes``, as the selection reads them).
     """
-    view = data.at()
-    out: dict[str, tuple[np.ndarray, list]] = {
-        'mass': (view.signal(Signal.ACCELERATION)[:, None], ['mass'])}
-    base = spec_of(model)
-    for name, t in TERMS.items():
-        if t.kind is not EffectKind.FORCE or t.applicable(data.summary) is not None:
-            continue
-        if t.params and name not in model.names:
-            if name != 'stribeck' or not model.has('coulomb'):
-                continue
-            eta = {'vs': 0.1 * max(data.summary.speeds[95], 1e-6), 'delta': 2.0}
-        else:
-            eta = base.of(name)
-        spec = base.with_(name, eta)
-        cols = [c for c in t.columns(eta, context(spec, data))]
-        if not cols:
-            continue
-        out[name] = (np.column_stack(view.columns(cols)), [c.label for c in cols])
-    return out
-
-
-def explain(model: AxisModel, data: Dataset, r: np.ndarray) -> Candidate | None:
-    """Return the candidate removing most of the residual ``r`` after its parameter price."""
-    sse0 = float(r @ r)
-    n = len(r)
-    if sse0 <= 0 or n < 10:
+    if t.kind is not EffectKind.FORCE:
+        return (f'{name} acts on the {t.kind.value}, not as a force: it has no column to '
+                f'screen (motor-comp diagnose searches it)')
+    why = t.applicable(s)
+    if why is not None:
+        return why
+    if name in spec.names:
         return None
-    n_eff = max(data.n_eff, 2.0)
+    present = set(spec.names)
+    missing = [r for r in t.requires if r not in present]
+    if missing:
+        return f'{name} is defined relative to {", ".join(missing)}, which the model lacks'
+    if t.requires_any and not set(t.requires_any) & present:
+        return f'{name} needs one of {", ".join(t.requires_any)} in the model'
+    clash = sorted(set(t.excludes) & present
+                   | {m for m in present if name in TERMS[m].excludes})
+    if clash:
+        return f'{name} cannot stand beside {", ".join(clash)} (two models of one phenomenon)'
+    return None
+
+
+def _starts(name: str, t: Term, spec: Spec, res: _Residual) -> list[dict] | str:
+    """Return the nonlinear parameters to screen ``name`` at, or why there are none.
+
+    A term of the model: its own.  Another: the term's starts from the residual
+    (:meth:`Term.initial`, e.g. a ripple's spectral peak, a friction profile's knots),
+    else the grid of its declared search space (:meth:`Term.space`), each completed
+    from the model's coefficients (:meth:`Term.derive`) — what the search of
+    ``motor-comp diagnose`` starts from, without its local refinement.
+    """
+    if name in spec.names:
+        return [spec.of(name)]
+    s = res.data.summary
+    ctx = context(spec.with_(name, {}), res.data)
+    starts = [dict(e) for e in t.initial(s, ctx, (res.x, res.r))]
+    if not starts:
+        space = t.space(s, ctx)
+        bare = [p.name for p in space if not p.grid]
+        if bare:
+            return (f'{name} has no start for {", ".join(bare)} without a search '
+                    f'(motor-comp diagnose searches it)')
+        starts = [{p.name: tuple(v) if isinstance(v, tuple) else float(v)
+                   for p, v in zip(space, combo)}
+                  for combo in itertools.product(*[p.grid for p in space])]
+    return [t.derive(e, res.values) for e in starts]
+
+
+def _fit(cols: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, float]:
+    """Return the least-squares coefficients of ``r`` on ``cols`` and the SSE left."""
+    theta, *_ = np.linalg.lstsq(cols, r, rcond=None)
+    d = r - cols @ theta
+    return theta, float(d @ d)
+
+
+def _screen(model: AxisModel, kin: Kinematics, base: _Residual) \
+        -> tuple[Candidate | None, tuple[tuple[str, str], ...]]:
+    """Return the candidate removing most of the model's residual, and the terms not screened.
+
+    Every force term of the library is regressed, one at a time, on the residual of
+    ``model`` over the rows of the processing the term is judged with
+    (:func:`~motor_comp.workbench.library.processing_for`: pre-sliding's rows reach the
+    stops) — the model's terms at their own nonlinear parameters (a *change*), the
+    others at their declared starts (the best of them) — and so is the mass.  The
+    score is the share of the residual energy removed minus a price per parameter
+    (coefficients and chosen nonlinear parameters) of ``ln(n_eff)/n_eff``, BIC-like
+    on the window's independent samples.
+
+    Parameters
+    ----------
+    model : AxisModel
+        The model under watch.
+    kin : Kinematics
+        The window's kinematics (for a term judged on other rows).
+    base : _Residual
+        The model's residual on the window's dataset (:func:`~.library.dataset_for`).
+
+    Returns
+    -------
+    candidate : Candidate or None
+        The best-scoring candidate (None when nothing removes any of the residual).
+    skipped : tuple of (str, str)
+        The library's terms the window cannot screen, with the reason.
+    """
+    spec = spec_of(model)
+    data = base.data
+    residuals: list[tuple[Processing, _Residual | str]] = [(data.processing, base)]
+    skipped: list[tuple[str, str]] = []
     best: tuple[float, Candidate] | None = None
-    for name, (cols, keys) in _columns(model, data).items():
-        theta, *_ = np.linalg.lstsq(cols, r, rcond=None)
-        d = r - cols @ theta
-        explained = 1.0 - float(d @ d) / sse0
-        score = explained - len(keys) * math.log(n_eff) / n_eff
-        present = model.has(name) or (name == 'mass')
-        cand = Candidate(effect=name, status='changed' if present else 'missing',
-                         explained=max(explained, 0.0),
-                         change={k: float(t) for k, t in zip(keys, theta)})
-        if best is None or score > best[0]:
-            best = (score, cand)
-    return best[1] if best is not None and best[1].explained > 0 else None
+
+    def consider(name: str, res: _Residual, cols: np.ndarray, labels: list,
+                 n_nonlinear: int) -> tuple[float, Candidate] | None:
+        sse0 = float(res.r @ res.r)
+        if sse0 <= 0 or len(res.r) < 10:
+            return None
+        theta, sse = _fit(cols, res.r)
+        explained = 1.0 - sse / sse0
+        n_eff = max(res.data.n_eff, 2.0)
+        score = explained - (len(labels) + n_nonlinear) * math.log(n_eff) / n_eff
+        present = name == MASS[0] or model.has(name)
+        return score, Candidate(effect=name, status='changed' if present else 'missing',
+                                explained=max(explained, 0.0),
+                                change={k: float(v) for k, v in zip(labels, theta)})
+
+    def better(a: tuple[float, Candidate] | None, b: tuple[float, Candidate] | None) \
+            -> tuple[float, Candidate] | None:
+        return b if a is None or (b is not None and b[0] > a[0]) else a
+
+    view = base.design.view
+    best = better(best, consider(MASS[0], base, view.signal(Signal.ACCELERATION)[:, None],
+                                 [MASS[1]], 0))
+    for name, t in TERMS.items():
+        why = _unscreenable(name, t, spec, data.summary)
+        if why is not None:
+            skipped.append((name, why))
+            continue
+        proc = processing_for(spec.with_(name, spec.of(name)))
+        res = next((r for p, r in residuals if p == proc), None)
+        if res is None:
+            try:
+                res = _residual(Dataset([kin], model, folds=2, processing=proc), spec, model)
+            except MotorCompError as e:
+                res = f'{name} is judged on other rows, too few in the window: {e}'
+            residuals.append((proc, res))
+        if isinstance(res, str):
+            skipped.append((name, res))
+            continue
+        starts = _starts(name, t, spec, res)
+        if isinstance(starts, str):
+            skipped.append((name, starts))
+            continue
+        own = None
+        for eta in starts:
+            ctx = context(spec.with_(name, eta), res.data)
+            cols = t.columns(eta, ctx)
+            if not cols:
+                continue
+            X = np.column_stack(res.design.view.columns(cols, rests=res.design.ctx.rests))
+            n_nl = 0 if name in spec.names else len(t.nonlinear(eta))
+            own = better(own, consider(name, res, X, [c.label for c in cols], n_nl))
+        if own is None and starts:
+            skipped.append((name, f'{name} has no column at its start'))
+        best = better(best, own)
+    cand = best[1] if best is not None and best[1].explained > 0 else None
+    return cand, tuple(skipped)
 
 
 def window_health(t: np.ndarray, position: np.ndarray, command: np.ndarray,
@@ -217,14 +348,13 @@ def window_health(t: np.ndarray, position: np.ndarray, command: np.ndarray,
     n_fit = int(sum(np.count_nonzero(m) for m in data.masks))
     if n_fit < min_samples:
         return stale
-    spec = spec_of(model)
-    d = design(data, spec, model)
-    r = d.y - d.X @ theta_of(model, spec, d.ctx)
+    base = _residual(data, spec_of(model), model)
+    r = base.r
     nrmse = math.sqrt(float(r @ r) / data.den) if data.den > 0 else float('inf')
     rms = float(np.sqrt(np.mean(r ** 2)))
     level = Level.OK if nrmse < warn else Level.WARN if nrmse < error else Level.ERROR
     unit = model.units.force
-    cand = explain(model, data, r) if level is not Level.OK else None
+    cand, unscreened = _screen(model, kin, base) if level is not Level.OK else (None, ())
     text = f'force NRMSE {100 * nrmse:.1f} % (RMS residual {rms:.3g} {unit})'
     if level is Level.OK:
         msg = f'model explains the axis: {text}'
@@ -232,4 +362,4 @@ def window_health(t: np.ndarray, position: np.ndarray, command: np.ndarray,
         msg = f'model no longer explains the axis: {text}'
         if cand is not None:
             msg += f'; candidate: {cand.sentence()}'
-    return Health(level, nrmse, rms, n_fit, duration, cand, msg)
+    return Health(level, nrmse, rms, n_fit, duration, cand, msg, unscreened)

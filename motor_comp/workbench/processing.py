@@ -146,9 +146,12 @@ def stencil_gain(w: np.ndarray, vdt: np.ndarray) -> np.ndarray:
     return np.sinc(np.outer(vdt, w) / (2 * math.pi)) ** 2
 
 
-def short_window(kin: Kinematics) -> int:
-    """Return the Savitzky–Golay window of the pointwise laws: a third of the derivative's."""
-    return max(5, (kin.window // 3) | 1)
+def short_window(kin: Kinematics, scale: float = 1.0) -> int:
+    """Return the Savitzky–Golay window of the pointwise laws: a third of the derivative's.
+
+    ``scale`` lengthens it (the processing spread of the standard errors).
+    """
+    return max(5, int(kin.window * scale / 3) | 1)
 
 
 def point_velocity(kin: Kinematics, x: np.ndarray) -> np.ndarray:
@@ -163,15 +166,16 @@ def point_velocity(kin: Kinematics, x: np.ndarray) -> np.ndarray:
                        mode='mirror') / kin.dt
 
 
-def gms_position(kin: Kinematics, x: np.ndarray) -> np.ndarray:
+def gms_position(kin: Kinematics, x: np.ndarray, scale: float = 1.0) -> np.ndarray:
     """Return the position the GMS elements are driven by: a short Savitzky–Golay smoothing.
 
     The elements' break-away distances are micrometres; the derivative window's
     smoothing rounds each reversal over that scale, so a freed shortest element came
     out stiffer than the truth (+32 % on the project's own 1 kHz run).  The short
-    window keeps the reversal's shape and still averages the encoder noise.
+    window keeps the reversal's shape and still averages the encoder noise; ``scale``
+    lengthens it (the processing spread).
     """
-    return correlate1d(np.asarray(x, dtype=float), _coeffs(short_window(kin), 2, 0),
+    return correlate1d(np.asarray(x, dtype=float), _coeffs(short_window(kin, scale), 2, 0),
                        mode='mirror')
 
 
@@ -267,6 +271,10 @@ class Processing:
     decimate : bool
         Keep every ``W/8``-th fitted sample (the fits and every reported figure), or
         every one (the residual figures).
+    gms_scale : float
+        Length of the pre-sliding elements' position smoothing relative to
+        :func:`short_window` (the processing term of the standard errors refits with 2:
+        that smoothing rounds each reversal, and the GMS stiffness feels it).
     turns : bool
         Fit the sliding samples right up to each stop (the transitions out of and into
         a rest, where pre-sliding acts; the rest itself is out of the force balance),
@@ -279,6 +287,7 @@ class Processing:
     smoother_scale: float = 1.0
     decimate: bool = True
     turns: bool = False
+    gms_scale: float = 1.0
 
     def step(self, W: int) -> int:
         """Return the decimation step [samples] for a smoother of ``W`` samples."""
