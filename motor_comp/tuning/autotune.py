@@ -25,6 +25,7 @@ one line naming the stage, e.g. ``autotune stopped in stage 'excite': travel lim
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import time
 from pathlib import Path
@@ -34,6 +35,8 @@ from motor_comp.control.limits import Limits, check_reference
 from motor_comp.errors import InputFileError, LimitTripError, MotorCompError, \
     ParameterError
 from motor_comp.tuning import plan
+from motor_comp.tuning.report import finite
+from motor_comp.tuning.spec import Axis, AxisSpec
 
 #: excitation length [s]: every part of the design once on both plants (46 s on the
 #: ball-screw's default limits) and a few repetitions; 60 s added fast passes on the
@@ -267,8 +270,8 @@ def reference_end(path: Path, namespace: str) -> float:
 def payload(path: Path, *, duration: float, window: tuple[float, float],
             namespace: str) -> Any:
     """Return the recorded run cut to the segment's payload ``window`` (trajectory time)."""
-    from motor_comp.workbench import load_run
-    run = load_run(path)
+    from motor_comp.logs import read_run
+    run = read_run(path, require={'voltage': 'the fit needs the command autotune sent'})
     t0 = reference_end(path, namespace) - duration
     dt = float(run.t[1] - run.t[0]) if len(run) > 1 else 0.0
     part = run.slice(t0 + window[0] - 0.25 * dt, t0 + window[1] + 0.25 * dt)
@@ -278,6 +281,10 @@ def payload(path: Path, *, duration: float, window: tuple[float, float],
     return dataclasses.replace(part, name=Path(path).stem)
 
 
+#: builds the axis of a session: ``(spec, log directory, ROS_DOMAIN_ID or None)``
+AxisFactory = Callable[[AxisSpec, Path, 'int | None'], Axis]
+
+
 class Autotune:
     """Run the stages of module docstring; :meth:`run` returns the :class:`Outcome`.
 
@@ -285,13 +292,17 @@ class Autotune:
     ----------
     options : Options
         What was asked.
+    axis : callable
+        Builds the axis the runs are played on (``motor-comp autotune`` gives
+        :class:`motor_comp.cli.axis_session.AxisSession`: the node processes).
     say : callable
         Progress lines (one per stage, with its wall time).
     """
 
-    def __init__(self, options: Options, *, say: Callable[[str], None] = lambda s: None
-                 ) -> None:
+    def __init__(self, options: Options, *, axis: AxisFactory,
+                 say: Callable[[str], None] = lambda s: None) -> None:
         self.o = options
+        self.axis = axis
         self.say = say
         self.stage = ''
 
@@ -355,10 +366,7 @@ class Autotune:
                         mode=self.controller, control_rate=self.rate)
         d = design(self.start, self.design_limits, duration=self.o.excite_duration,
                    loop=loop, seed=self.o.seed)
-        import json
-
-        from motor_comp.cli.common import jsonable
-        (out.directory / 'excite.json').write_text(json.dumps(jsonable(d.as_dict()),
+        (out.directory / 'excite.json').write_text(json.dumps(finite(d.as_dict()),
                                                               indent=1), encoding='utf-8')
         self._step(out, 'design', t0, ('excite.json',),
                    f'{d.table.duration:.1f} s excitation, {len(d.order)} parts, peak '
@@ -419,7 +427,6 @@ class Autotune:
 
     def run(self) -> Outcome:
         """Run every stage; the outcome (raises after recording what was done)."""
-        from motor_comp.tuning.session import AxisSession, AxisSpec
         o = self.o
         self._setup()
         directory = _prepare_directory(o.output)
@@ -440,7 +447,7 @@ class Autotune:
                             monitor=o.monitor, namespace=o.namespace, seed=o.seed,
                             realtime_priority=o.realtime_priority)
             self.stage = 'excite'
-            with AxisSession(spec, directory / 'logs', domain_id=o.domain_id) as axis:
+            with self.axis(spec, directory / 'logs', o.domain_id) as axis:
                 out.domain = axis.domain
                 self._stages(axis, out, d)
             self.stage = 'report'
@@ -460,7 +467,8 @@ class Autotune:
         return out
 
     def _stages(self, axis: Any, out: Outcome, d: Any) -> None:
-        from motor_comp.workbench import InputHold, fit, kinematics
+        # the workbench's public entry points only (its internals are being rebuilt)
+        from motor_comp.workbench import fit, kinematics
         o = self.o
         directory = out.directory
         start_task = float(self.task.table.x[0])
@@ -475,15 +483,13 @@ class Autotune:
         # -- fit --auto from the start model ---------------------------------------------
         self.stage = 'fit'
         t0 = time.monotonic()
-        hold = InputHold.ZOH if self.start.input.value == 'voltage' else InputHold.SAMPLE
+        # a voltage command is held over the period; a logged current or force sampled
+        hold = 'zoh' if self.start.input.value == 'voltage' else 'sample'
         result = fit(kinematics(run, hold=hold), self.start, auto=True)
         out.fit = result
         fitted = directory / 'fitted_model.yaml'
         result.model.save(fitted)
-        import json
-
-        from motor_comp.cli.common import jsonable
-        (directory / 'fit.json').write_text(json.dumps(jsonable(result.as_dict()), indent=1),
+        (directory / 'fit.json').write_text(json.dumps(finite(result.as_dict()), indent=1),
                                             encoding='utf-8')
         found = [s.effect for s in result.steps if s.effect]
         self._step(out, 'fit', t0, ('fitted_model.yaml', 'fit.json'),
@@ -525,10 +531,11 @@ class Autotune:
             write_report(out, figures=False)
 
 
-def autotune(options: Options, *, say: Callable[[str], None] = lambda s: None) -> Outcome:
-    """Run ``motor-comp autotune`` (module docstring); return its :class:`Outcome`."""
-    return Autotune(options, say=say).run()
+def autotune(options: Options, *, axis: AxisFactory,
+             say: Callable[[str], None] = lambda s: None) -> Outcome:
+    """Run the stages of the module docstring on ``axis``; return the :class:`Outcome`."""
+    return Autotune(options, axis=axis, say=say).run()
 
 
-__all__ = ['ACCEL_WINDOW', 'Autotune', 'BANDWIDTH', 'EXCITE_DURATION', 'Options', 'Outcome',
-           'Step', 'autotune', 'payload', 'reference_end']
+__all__ = ['ACCEL_WINDOW', 'AxisFactory', 'Autotune', 'BANDWIDTH', 'EXCITE_DURATION',
+           'Options', 'Outcome', 'Step', 'autotune', 'payload', 'reference_end']

@@ -105,8 +105,12 @@ def test_autotune_ballscrew_from_a_bare_model_with_monitor(tmp_path, autotune,
     excite, fitted = diag['excite']['monitor'], diag['fitted']['monitor']
     assert excite['statuses']['ERROR'] == excite['verdicts'] > 50
     assert excite['candidate'] == 'coulomb'
-    assert fitted['verdicts'] >= 15 and fitted['statuses']['ERROR'] == 0
-    assert fitted['statuses']['OK'] >= 0.8 * fitted['verdicts']
+    # every verdict OK once the monitor's 2 s window has filled (the first two, at 0.5 s
+    # and 1 s, weigh the start at rest: ERROR for the true model's run alike)
+    true = diag['true']['monitor']
+    assert fitted['verdicts'] >= 15
+    assert fitted['statuses']['OK'] >= fitted['verdicts'] - 2
+    assert fitted['statuses']['OK'] >= true['statuses']['OK'] - 1
     assert fitted['last_nrmse'] < 0.15
     assert not diag['fitted']['limits']['tripped']
     assert 'monitor.png' in (out / 'index.html').read_text()

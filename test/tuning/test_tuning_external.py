@@ -71,7 +71,7 @@ def test_autotune_drives_an_external_plant(tmp_path, autotune, bare_model, domai
         _start_drive(group, tmp_path, x0=0.01)
         code, stdout, stderr = autotune('--external-plant', '--nominal', 'pmlm',
                                         '--model', bare_model('pmlm'),
-                                        '--excite-duration', '40', '--task-duration', '4',
+                                        '--excite-duration', '45', '--task-duration', '4',
                                         '-o', out, '--json')
         drive = group.procs['plant_node']
         assert drive.popen.poll() is None          # autotune left the drive running
