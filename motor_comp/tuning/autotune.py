@@ -153,6 +153,7 @@ class Outcome:
 
     options: Options
     directory: Path
+    controller: str = ''
     axis_limits: Limits | None = None
     excitation: Any = None
     task_label: str = ''
@@ -195,7 +196,8 @@ class Outcome:
         out: dict[str, Any] = {
             'complete': not self.error, 'directory': str(self.directory),
             'plant': o.plant, 'external_plant': o.plant is None,
-            'nominal': o.nominal or o.plant, 'mode': o.timing, 'task_name': self.task_label,
+            'nominal': o.nominal or o.plant, 'controller': self.controller, 'mode': o.timing,
+            'task_name': self.task_label,
             'limits': None if lim is None else {
                 'travel': list(lim.travel), 'vmax': lim.vmax, 'amax': lim.amax,
                 'umax': lim.umax, 'max_error': lim.max_error},
@@ -430,7 +432,8 @@ class Autotune:
         o = self.o
         self._setup()
         directory = _prepare_directory(o.output)
-        out = Outcome(options=o, directory=directory, axis_limits=self.limits,
+        out = Outcome(options=o, directory=directory, controller=self.controller,
+                      axis_limits=self.limits,
                       excitation=self.design_limits, task_label=self.task.label,
                       start_model=self.start,
                       true_model=None if self.plant_cfg is None else self.plant_cfg.model)

@@ -203,7 +203,7 @@ def _page(out: Any, data: dict, figs: list[Path]) -> str:
              f'autotune</title><style>{_CSS}</style></head><body>',
              '<h1>motor-comp autotune</h1>',
              f'<p>Axis: {e(o.plant or "external drive")} (controller '
-             f'{e(str(o.controller or "default"))} on the nominal plant '
+             f'{e(out.controller)} on the nominal plant '
              f'{e(str(o.nominal or o.plant))}), {e(o.timing)}; start model '
              f'<code>{e(str(o.model))}</code>; task {e(out.task_label)}.</p>']
     if out.error:
