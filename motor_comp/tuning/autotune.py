@@ -39,8 +39,8 @@ from motor_comp.tuning.report import finite
 from motor_comp.tuning.spec import Axis, AxisSpec
 
 #: excitation length [s]: every part of the design once on both plants (46 s on the
-#: ball-screw's default limits) and a few repetitions; 60 s added fast passes on the
-#: PMLM that led ``fit --auto`` to a spurious pre-sliding (bench/autotune.py notes)
+#: ball-screw's default limits) and a few repetitions (45–70 s recover the same on the
+#: PMLM; bench/README.md, the autotune section)
 EXCITE_DURATION = 50.0
 #: the excitation's highest frequency [Hz] (``excite --bandwidth``)
 BANDWIDTH = 5.0
