@@ -215,21 +215,17 @@ class AxisSession:
         Where the params files and the node logs go (kept: the user's record).
     domain_id : int, optional
         ``ROS_DOMAIN_ID`` (default ``$ROS_DOMAIN_ID`` or a private one).
-    say : callable, optional
-        Progress lines.
     """
 
-    def __init__(self, spec: AxisSpec, logdir: Path, *, domain_id: int | None = None,
-                 say: Callable[[str], None] = lambda s: None) -> None:
+    def __init__(self, spec: AxisSpec, logdir: Path, *, domain_id: int | None = None
+                 ) -> None:
         self.spec = spec
         self.logdir = Path(logdir)
         self.domain_id = domain_id
-        self.say = say
         self.group: Any = None
         self.client: RosClient | None = None
         self._env_cm: Any = None
         self._configured = False
-        self.runs = 0
 
     # -- start and stop ------------------------------------------------------------------
     def __enter__(self) -> 'AxisSession':
@@ -353,7 +349,6 @@ class AxisSession:
         if code not in (0, None):
             raise SessionError(f'recorder_node exited with status {code}: '
                                f'{group.procs[labels["recorder_node"]].tail()}')
-        self.runs += 1
         logs = tuple(group.procs[label].log for label in labels.values())
         if tripped:
             raise LimitTripError(tripped)

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from motor_comp.control.limits import Limits, check_reference
+from motor_comp.control.trajectories import Table, write_table
 from motor_comp.errors import InputFileError, LimitTripError, MotorCompError, \
     ParameterError
 from motor_comp.tuning import plan
@@ -343,7 +344,6 @@ class Autotune:
                                        accel_window=ACCEL_WINDOW, travel=o.travel,
                                        vmax=o.vmax, amax=o.amax, umax=o.umax,
                                        max_error=o.max_error)
-        from motor_comp.control.trajectories import Table
         # the task itself must keep the limits: refused before anything moves
         try:
             check_reference(Table(data=self.task.table), self.limits,
@@ -382,7 +382,8 @@ class Autotune:
         u = self.start.units
         return u.position, u.velocity, u.acceleration
 
-    def _segment(self, axis: Any, payload_table: Any, *, lead_to: float | None) -> Any:
+    def _segment(self, axis: Axis, payload_table: Any, *, lead_to: float | None
+                 ) -> plan.Segment:
         """Return the run's table: led in and out on a drive with its own clock."""
         if self.o.timing == 'lockstep':
             return plan.segment_table(payload_table, rate=self.rate, limits=self.design_limits)
@@ -396,16 +397,14 @@ class Autotune:
         seg = plan.segment_table(payload_table, rate=self.rate, limits=self.design_limits,
                                  x_from=x_from, x_to=lead_to, lead=plan.LEAD,
                                  tail=plan.TAIL)
-        from motor_comp.control.trajectories import Table
         check_reference(Table(data=seg.table), self.limits, duration=seg.table.duration,
                         rate=self.rate)
         return seg
 
-    def _play(self, axis: Any, out: Outcome, name: str, label: str, seg: Any, *,
-              compensation: str = '', monitor_model: str = '') -> Any:
-        """Write the run's table, play it, read the payload back; the payload run."""
+    def _play(self, axis: Axis, out: Outcome, name: str, label: str, seg: plan.Segment, *,
+              compensation: str = '', monitor_model: str = '') -> tuple[Any, tuple, float]:
+        """Write the run's table, play it; the run cut to its payload, its files, start."""
         from motor_comp.analysis.diagnostics import summarise
-        from motor_comp.control.trajectories import write_table
         from motor_comp.logs.diagnostics import read_diagnostics
         t0 = time.monotonic()
         table_file = out.directory / f'{name}.csv'
@@ -413,9 +412,9 @@ class Autotune:
         mcap = out.directory / f'{name}.mcap'
         out.recordings[label] = mcap.name
         try:
-            rec = axis.run(name, table_file, duration=seg.table.duration,
-                           x0=float(seg.table.x[0]), output=mcap, compensation=compensation,
-                           monitor_model=monitor_model)
+            axis.run(name, table_file, duration=seg.table.duration,
+                     x0=float(seg.table.x[0]), output=mcap, compensation=compensation,
+                     monitor_model=monitor_model)
         finally:   # also a tripped run's: the limits' ERROR, the monitor's verdicts
             if mcap.exists():
                 try:
@@ -424,8 +423,7 @@ class Autotune:
                     pass
         run = payload(mcap, duration=seg.table.duration, window=seg.window,
                       namespace=self.o.namespace)
-        files = (table_file.name, mcap.name)
-        return run, files, rec, t0
+        return run, (table_file.name, mcap.name), t0
 
     def run(self) -> Outcome:
         """Run every stage; the outcome (raises after recording what was done)."""
@@ -469,7 +467,7 @@ class Autotune:
             raise
         return out
 
-    def _stages(self, axis: Any, out: Outcome, d: Any) -> None:
+    def _stages(self, axis: Axis, out: Outcome, d: Any) -> None:
         # the workbench's public entry points only (its internals are being rebuilt)
         from motor_comp.workbench import fit, kinematics
         o = self.o
@@ -478,7 +476,7 @@ class Autotune:
         # -- excite: the designed table through the nodes --------------------------------
         self.stage = 'excite'
         seg = self._segment(axis, d.table, lead_to=start_task)
-        run, files, rec, t0 = self._play(
+        run, files, t0 = self._play(
             axis, out, 'excite', 'excite', seg,
             monitor_model=str(directory / 'start_model.yaml') if o.monitor else '')
         self._step(out, 'excite', t0, files,
@@ -507,7 +505,7 @@ class Autotune:
         for label, comp in runs:
             self.stage = f'task {label}'
             seg = self._segment(axis, self.task.table, lead_to=start_task)
-            run, files, rec, t0 = self._play(
+            run, files, t0 = self._play(
                 axis, out, f'task_{label}', label, seg, compensation=comp,
                 monitor_model=str(fitted) if o.monitor else '')
             score = plan.TaskScore.of(run)
