@@ -89,6 +89,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``motor-comp autotune``."""
+    from motor_comp.cli.axis_session import AxisSession
     from motor_comp.cli.run import DEFAULT_RT_PRIORITY, require_ros
     from motor_comp.tuning.autotune import Options, autotune
     require_ros('motor-comp autotune')
@@ -116,7 +117,8 @@ def run(args: argparse.Namespace) -> int:
 
     def say(msg: str) -> None:
         print(msg, file=sys.stderr if args.json else sys.stdout, flush=True)
-    out = autotune(opts, say=say)
+    out = autotune(opts, axis=lambda spec, logdir, domain: AxisSession(
+        spec, logdir, domain_id=domain), say=say)
     if args.json:
         print(json.dumps(jsonable(out.as_dict())))
         return 0

@@ -401,7 +401,7 @@ def _partial_path(out: Path) -> Path:
     raise AssertionError('unreachable')
 
 
-def _trip_reason(proc: NodeProcess) -> str:
+def trip_reason(proc: NodeProcess) -> str:
     """Return the controller's one-line trip reason (its ``<node>: error: …`` line)."""
     try:
         lines = proc.log.read_text(errors='replace').splitlines()
@@ -461,7 +461,7 @@ def run_nodes(spec: RunSpec, *, workdir: Path | None = None, timeout: float | No
                 statuses = group.stop_all(['plant_node', 'trajectory_node', 'monitor_node',
                                            'controller_node', 'recorder_node'])
                 if statuses.get('controller_node') == TRIP_EXIT_STATUS:
-                    tripped = _trip_reason(group.procs['controller_node'])
+                    tripped = trip_reason(group.procs['controller_node'])
                 if statuses.get('recorder_node', 0) != 0:
                     raise NodeProcessError(f'recorder_node exited with status '
                                            f'{statuses["recorder_node"]}: '

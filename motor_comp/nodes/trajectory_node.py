@@ -307,6 +307,10 @@ class TrajectoryNode(ParamNode):
         if self._t0_ns is None and self._loop_closed:
             self._t0_ns = read_joint_state(msg)[0]
             self._t0_rx_ns = self.get_clock().now().nanoseconds
+            self.get_logger().info(
+                f'trajectory time starts with the sample stamped {self._t0_ns * 1e-9:.6f} s'
+                + (' (after the controller\'s first command)' if self.p['wait_for_command']
+                   else ''))
 
     def _on_command(self, msg: Float64 | bytes) -> None:
         # the controller answered a measurement (with the held start point): the loop is

@@ -25,19 +25,23 @@ one line naming the stage, e.g. ``autotune stopped in stage 'excite': travel lim
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import time
 from pathlib import Path
 from typing import Any, Callable
 
 from motor_comp.control.limits import Limits, check_reference
+from motor_comp.control.trajectories import Table, write_table
 from motor_comp.errors import InputFileError, LimitTripError, MotorCompError, \
     ParameterError
 from motor_comp.tuning import plan
+from motor_comp.tuning.report import finite
+from motor_comp.tuning.spec import Axis, AxisSpec
 
 #: excitation length [s]: every part of the design once on both plants (46 s on the
-#: ball-screw's default limits) and a few repetitions; 60 s added fast passes on the
-#: PMLM that led ``fit --auto`` to a spurious pre-sliding (bench/autotune.py notes)
+#: ball-screw's default limits) and a few repetitions (45–70 s recover the same on the
+#: PMLM; bench/README.md, the autotune section)
 EXCITE_DURATION = 50.0
 #: the excitation's highest frequency [Hz] (``excite --bandwidth``)
 BANDWIDTH = 5.0
@@ -150,6 +154,7 @@ class Outcome:
 
     options: Options
     directory: Path
+    controller: str = ''
     axis_limits: Limits | None = None
     excitation: Any = None
     task_label: str = ''
@@ -192,7 +197,8 @@ class Outcome:
         out: dict[str, Any] = {
             'complete': not self.error, 'directory': str(self.directory),
             'plant': o.plant, 'external_plant': o.plant is None,
-            'nominal': o.nominal or o.plant, 'mode': o.timing, 'task_name': self.task_label,
+            'nominal': o.nominal or o.plant, 'controller': self.controller, 'mode': o.timing,
+            'task_name': self.task_label,
             'limits': None if lim is None else {
                 'travel': list(lim.travel), 'vmax': lim.vmax, 'amax': lim.amax,
                 'umax': lim.umax, 'max_error': lim.max_error},
@@ -267,8 +273,8 @@ def reference_end(path: Path, namespace: str) -> float:
 def payload(path: Path, *, duration: float, window: tuple[float, float],
             namespace: str) -> Any:
     """Return the recorded run cut to the segment's payload ``window`` (trajectory time)."""
-    from motor_comp.workbench import load_run
-    run = load_run(path)
+    from motor_comp.logs import read_run
+    run = read_run(path, require={'voltage': 'the fit needs the command autotune sent'})
     t0 = reference_end(path, namespace) - duration
     dt = float(run.t[1] - run.t[0]) if len(run) > 1 else 0.0
     part = run.slice(t0 + window[0] - 0.25 * dt, t0 + window[1] + 0.25 * dt)
@@ -278,6 +284,10 @@ def payload(path: Path, *, duration: float, window: tuple[float, float],
     return dataclasses.replace(part, name=Path(path).stem)
 
 
+#: builds the axis of a session: ``(spec, log directory, ROS_DOMAIN_ID or None)``
+AxisFactory = Callable[[AxisSpec, Path, 'int | None'], Axis]
+
+
 class Autotune:
     """Run the stages of module docstring; :meth:`run` returns the :class:`Outcome`.
 
@@ -285,13 +295,17 @@ class Autotune:
     ----------
     options : Options
         What was asked.
+    axis : callable
+        Builds the axis the runs are played on (``motor-comp autotune`` gives
+        :class:`motor_comp.cli.axis_session.AxisSession`: the node processes).
     say : callable
         Progress lines (one per stage, with its wall time).
     """
 
-    def __init__(self, options: Options, *, say: Callable[[str], None] = lambda s: None
-                 ) -> None:
+    def __init__(self, options: Options, *, axis: AxisFactory,
+                 say: Callable[[str], None] = lambda s: None) -> None:
         self.o = options
+        self.axis = axis
         self.say = say
         self.stage = ''
 
@@ -330,7 +344,6 @@ class Autotune:
                                        accel_window=ACCEL_WINDOW, travel=o.travel,
                                        vmax=o.vmax, amax=o.amax, umax=o.umax,
                                        max_error=o.max_error)
-        from motor_comp.control.trajectories import Table
         # the task itself must keep the limits: refused before anything moves
         try:
             check_reference(Table(data=self.task.table), self.limits,
@@ -355,10 +368,7 @@ class Autotune:
                         mode=self.controller, control_rate=self.rate)
         d = design(self.start, self.design_limits, duration=self.o.excite_duration,
                    loop=loop, seed=self.o.seed)
-        import json
-
-        from motor_comp.cli.common import jsonable
-        (out.directory / 'excite.json').write_text(json.dumps(jsonable(d.as_dict()),
+        (out.directory / 'excite.json').write_text(json.dumps(finite(d.as_dict()),
                                                               indent=1), encoding='utf-8')
         self._step(out, 'design', t0, ('excite.json',),
                    f'{d.table.duration:.1f} s excitation, {len(d.order)} parts, peak '
@@ -372,7 +382,8 @@ class Autotune:
         u = self.start.units
         return u.position, u.velocity, u.acceleration
 
-    def _segment(self, axis: Any, payload_table: Any, *, lead_to: float | None) -> Any:
+    def _segment(self, axis: Axis, payload_table: Any, *, lead_to: float | None
+                 ) -> plan.Segment:
         """Return the run's table: led in and out on a drive with its own clock."""
         if self.o.timing == 'lockstep':
             return plan.segment_table(payload_table, rate=self.rate, limits=self.design_limits)
@@ -386,16 +397,14 @@ class Autotune:
         seg = plan.segment_table(payload_table, rate=self.rate, limits=self.design_limits,
                                  x_from=x_from, x_to=lead_to, lead=plan.LEAD,
                                  tail=plan.TAIL)
-        from motor_comp.control.trajectories import Table
         check_reference(Table(data=seg.table), self.limits, duration=seg.table.duration,
                         rate=self.rate)
         return seg
 
-    def _play(self, axis: Any, out: Outcome, name: str, label: str, seg: Any, *,
-              compensation: str = '', monitor_model: str = '') -> Any:
-        """Write the run's table, play it, read the payload back; the payload run."""
+    def _play(self, axis: Axis, out: Outcome, name: str, label: str, seg: plan.Segment, *,
+              compensation: str = '', monitor_model: str = '') -> tuple[Any, tuple, float]:
+        """Write the run's table, play it; the run cut to its payload, its files, start."""
         from motor_comp.analysis.diagnostics import summarise
-        from motor_comp.control.trajectories import write_table
         from motor_comp.logs.diagnostics import read_diagnostics
         t0 = time.monotonic()
         table_file = out.directory / f'{name}.csv'
@@ -403,9 +412,9 @@ class Autotune:
         mcap = out.directory / f'{name}.mcap'
         out.recordings[label] = mcap.name
         try:
-            rec = axis.run(name, table_file, duration=seg.table.duration,
-                           x0=float(seg.table.x[0]), output=mcap, compensation=compensation,
-                           monitor_model=monitor_model)
+            axis.run(name, table_file, duration=seg.table.duration,
+                     x0=float(seg.table.x[0]), output=mcap, compensation=compensation,
+                     monitor_model=monitor_model)
         finally:   # also a tripped run's: the limits' ERROR, the monitor's verdicts
             if mcap.exists():
                 try:
@@ -414,16 +423,15 @@ class Autotune:
                     pass
         run = payload(mcap, duration=seg.table.duration, window=seg.window,
                       namespace=self.o.namespace)
-        files = (table_file.name, mcap.name)
-        return run, files, rec, t0
+        return run, (table_file.name, mcap.name), t0
 
     def run(self) -> Outcome:
         """Run every stage; the outcome (raises after recording what was done)."""
-        from motor_comp.tuning.session import AxisSession, AxisSpec
         o = self.o
         self._setup()
         directory = _prepare_directory(o.output)
-        out = Outcome(options=o, directory=directory, axis_limits=self.limits,
+        out = Outcome(options=o, directory=directory, controller=self.controller,
+                      axis_limits=self.limits,
                       excitation=self.design_limits, task_label=self.task.label,
                       start_model=self.start,
                       true_model=None if self.plant_cfg is None else self.plant_cfg.model)
@@ -440,7 +448,7 @@ class Autotune:
                             monitor=o.monitor, namespace=o.namespace, seed=o.seed,
                             realtime_priority=o.realtime_priority)
             self.stage = 'excite'
-            with AxisSession(spec, directory / 'logs', domain_id=o.domain_id) as axis:
+            with self.axis(spec, directory / 'logs', o.domain_id) as axis:
                 out.domain = axis.domain
                 self._stages(axis, out, d)
             self.stage = 'report'
@@ -459,15 +467,16 @@ class Autotune:
             raise
         return out
 
-    def _stages(self, axis: Any, out: Outcome, d: Any) -> None:
-        from motor_comp.workbench import InputHold, fit, kinematics
+    def _stages(self, axis: Axis, out: Outcome, d: Any) -> None:
+        # the workbench's public entry points only (its internals are being rebuilt)
+        from motor_comp.workbench import fit, kinematics
         o = self.o
         directory = out.directory
         start_task = float(self.task.table.x[0])
         # -- excite: the designed table through the nodes --------------------------------
         self.stage = 'excite'
         seg = self._segment(axis, d.table, lead_to=start_task)
-        run, files, rec, t0 = self._play(
+        run, files, t0 = self._play(
             axis, out, 'excite', 'excite', seg,
             monitor_model=str(directory / 'start_model.yaml') if o.monitor else '')
         self._step(out, 'excite', t0, files,
@@ -475,15 +484,13 @@ class Autotune:
         # -- fit --auto from the start model ---------------------------------------------
         self.stage = 'fit'
         t0 = time.monotonic()
-        hold = InputHold.ZOH if self.start.input.value == 'voltage' else InputHold.SAMPLE
+        # a voltage command is held over the period; a logged current or force sampled
+        hold = 'zoh' if self.start.input.value == 'voltage' else 'sample'
         result = fit(kinematics(run, hold=hold), self.start, auto=True)
         out.fit = result
         fitted = directory / 'fitted_model.yaml'
         result.model.save(fitted)
-        import json
-
-        from motor_comp.cli.common import jsonable
-        (directory / 'fit.json').write_text(json.dumps(jsonable(result.as_dict()), indent=1),
+        (directory / 'fit.json').write_text(json.dumps(finite(result.as_dict()), indent=1),
                                             encoding='utf-8')
         found = [s.effect for s in result.steps if s.effect]
         self._step(out, 'fit', t0, ('fitted_model.yaml', 'fit.json'),
@@ -498,7 +505,7 @@ class Autotune:
         for label, comp in runs:
             self.stage = f'task {label}'
             seg = self._segment(axis, self.task.table, lead_to=start_task)
-            run, files, rec, t0 = self._play(
+            run, files, t0 = self._play(
                 axis, out, f'task_{label}', label, seg, compensation=comp,
                 monitor_model=str(fitted) if o.monitor else '')
             score = plan.TaskScore.of(run)
@@ -525,10 +532,11 @@ class Autotune:
             write_report(out, figures=False)
 
 
-def autotune(options: Options, *, say: Callable[[str], None] = lambda s: None) -> Outcome:
-    """Run ``motor-comp autotune`` (module docstring); return its :class:`Outcome`."""
-    return Autotune(options, say=say).run()
+def autotune(options: Options, *, axis: AxisFactory,
+             say: Callable[[str], None] = lambda s: None) -> Outcome:
+    """Run the stages of the module docstring on ``axis``; return the :class:`Outcome`."""
+    return Autotune(options, axis=axis, say=say).run()
 
 
-__all__ = ['ACCEL_WINDOW', 'Autotune', 'BANDWIDTH', 'EXCITE_DURATION', 'Options', 'Outcome',
-           'Step', 'autotune', 'payload', 'reference_end']
+__all__ = ['ACCEL_WINDOW', 'AxisFactory', 'Autotune', 'BANDWIDTH', 'EXCITE_DURATION',
+           'Options', 'Outcome', 'Step', 'autotune', 'payload', 'reference_end']

@@ -46,10 +46,10 @@ TRAVEL_MARGIN = 0.25
 SPEED_MARGIN, ACCEL_MARGIN = 1.5, 3.0
 #: the excitation asks at most this share of the speed and of the acceleration limit
 #: (after the measurement noise is taken off), so that the loop's transients do not trip
-#: them: the speed overshoots by the tracking error's rate, the measured acceleration
-#: by far more (a sticky axis breaks away: a stress run's PMLM showed 3.5 m/s² over the
-#: 10 ms window on a 1.85 m/s² reference)
-SPEED_SHARE, ACCEL_SHARE = 0.8, 0.5
+#: them: the speed overshoots by the tracking error's rate (the PMLM's PID in realtime on
+#: a loaded machine: 0.3 m/s on a 0.225 m/s move), the measured acceleration by far
+#: more (a sticky axis breaks away: 3.5 m/s² over the 10 ms window on 1.85 m/s²)
+SPEED_SHARE, ACCEL_SHARE = 0.7, 0.5
 #: share of the travel span the excitation keeps clear at each end (at least
 #: :data:`DESIGN_CLEAR_COUNTS` encoder counts)
 DESIGN_CLEAR, DESIGN_CLEAR_COUNTS = 0.05, 50.0

@@ -99,8 +99,8 @@ def fit_figure(fit: Any, path: Path) -> Path | None:
     if fit is None:
         return None
     fig, ax = _figure(7.0, 3.6)
-    labels = ['start'] + [('−' if s.action == 'remove' else '+') + str(s.effect)
-                          for s in fit.steps[1:]]
+    labels = ['start'] + [('−' if getattr(s, 'action', 'add') == 'remove' else '+')
+                          + str(s.effect) for s in fit.steps[1:]]
     y = [100 * s.force_nrmse for s in fit.steps]
     ax.plot(range(len(y)), y, 'o-')
     ax.set_xticks(range(len(y)), labels)
@@ -158,13 +158,23 @@ def _embed(path: Path) -> str:
             f'</a>)</figcaption></figure>')
 
 
+def finite(x: Any) -> Any:
+    """Replace non-finite floats by None, recursively (JSON has no NaN or infinity)."""
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [finite(v) for v in x]
+    return x
+
+
 def write_report(out: Any, *, figures: bool = True) -> tuple[str, ...]:
     """Write ``index.html``, the figures and ``autotune.json`` of an :class:`Outcome`.
 
     Returns the names of the files written.  ``figures=False`` rewrites the page and
     the JSON only (the figures of an earlier call stay).
     """
-    from motor_comp.cli.common import jsonable
     d = Path(out.directory)
     written = []
     figs: list[Path] = []
@@ -180,7 +190,7 @@ def write_report(out: Any, *, figures: bool = True) -> tuple[str, ...]:
                 figs.append(made)
         elif p.exists():
             figs.append(p)
-    data = jsonable(out.as_dict())
+    data = finite(out.as_dict())
     (d / 'autotune.json').write_text(json.dumps(data, indent=1), encoding='utf-8')
     (d / 'index.html').write_text(_page(out, data, figs), encoding='utf-8')
     return tuple(written) + ('autotune.json', 'index.html')
@@ -193,7 +203,7 @@ def _page(out: Any, data: dict, figs: list[Path]) -> str:
              f'autotune</title><style>{_CSS}</style></head><body>',
              '<h1>motor-comp autotune</h1>',
              f'<p>Axis: {e(o.plant or "external drive")} (controller '
-             f'{e(str(o.controller or "default"))} on the nominal plant '
+             f'{e(out.controller)} on the nominal plant '
              f'{e(str(o.nominal or o.plant))}), {e(o.timing)}; start model '
              f'<code>{e(str(o.model))}</code>; task {e(out.task_label)}.</p>']
     if out.error:
@@ -229,11 +239,14 @@ def _page(out: Any, data: dict, figs: list[Path]) -> str:
         rows = [[e(g), e(k), _fmt(v), '—' if se is None else f'{se:.3g}']
                 for g, k, v, se in _parameters(out.fit.model, out.fit.uncertainty)]
         parts.append(_table(['effect', 'parameter', 'value (SI)', 'standard error'], rows))
-        rows = [[str(i), e(str(s.effect or 'start model')), e(s.action if s.effect else ''),
-                 f'{s.force_nrmse:.4f}'] for i, s in enumerate(out.fit.steps)]
+        rows = [[str(i), e(str(s.effect or 'start model')),
+                 e(getattr(s, 'action', 'add') if s.effect else ''), f'{s.force_nrmse:.4f}']
+                for i, s in enumerate(out.fit.steps)]
         parts.append('<h3>Steps of fit --auto</h3>')
         parts.append(_table(['step', 'effect', 'action', 'held-out force NRMSE'], rows))
-        for note in list(out.fit.identifiability) + list(out.fit.experiment):
+        notes = (list(getattr(out.fit, 'identifiability', ()))
+                 + list(getattr(out.fit, 'experiment', ())))
+        for note in notes:
             parts.append(f'<p>{e(str(note))}</p>')
     # -- diagnostics ----------------------------------------------------------------------
     if out.diagnostics:
@@ -262,4 +275,5 @@ def _page(out: Any, data: dict, figs: list[Path]) -> str:
     return '\n'.join(parts)
 
 
-__all__ = ['CAPTIONS', 'fit_figure', 'monitor_figure', 'task_figure', 'write_report']
+__all__ = ['CAPTIONS', 'finite', 'fit_figure', 'monitor_figure', 'task_figure',
+           'write_report']

@@ -6,11 +6,13 @@ derived limits, played and recorded by the nodes, ``fit --auto``, the task run w
 with the fitted and with the true plant model as compensation (each loaded into the one
 running ``controller_node`` through its ``compensation_model`` parameter) — recovers
 ≥ 80 % of the RMS-error reduction and ≥ 70 % of the quadrant-glitch reduction that the
-true model gives, on each plant's default task.  Measured (lockstep is deterministic):
-PMLM p2p under PID 98 % / 95 %, ball-screw sine under N-PID 96 % / 94 %.
+true model gives, on each plant's default task.  Measured (lockstep is deterministic up
+to the loaded machine's timing): PMLM p2p under PID 98.1 % / 95.6 %, ball-screw sine
+under N-PID 94.3 % / 91.2 %.
 
 Pre-sliding: the ball-screw plant has GMS friction, but ``fit --auto`` on main does not
-select ``presliding`` from this excitation (nor ``delay``): it is not asserted either way.
+select ``presliding`` from this excitation (nor ``delay``, nor ``viscous`` since the
+excitation keeps 70 % of the speed limit): they are not asserted either way.
 """
 from __future__ import annotations
 
@@ -105,8 +107,12 @@ def test_autotune_ballscrew_from_a_bare_model_with_monitor(tmp_path, autotune,
     excite, fitted = diag['excite']['monitor'], diag['fitted']['monitor']
     assert excite['statuses']['ERROR'] == excite['verdicts'] > 50
     assert excite['candidate'] == 'coulomb'
-    assert fitted['verdicts'] >= 15 and fitted['statuses']['ERROR'] == 0
-    assert fitted['statuses']['OK'] >= 0.8 * fitted['verdicts']
+    # every verdict OK once the monitor's 2 s window has filled (the first two, at 0.5 s
+    # and 1 s, weigh the start at rest: ERROR for the true model's run alike)
+    true = diag['true']['monitor']
+    assert fitted['verdicts'] >= 15
+    assert fitted['statuses']['OK'] >= fitted['verdicts'] - 2
+    assert fitted['statuses']['OK'] >= true['statuses']['OK'] - 1
     assert fitted['last_nrmse'] < 0.15
     assert not diag['fitted']['limits']['tripped']
     assert 'monitor.png' in (out / 'index.html').read_text()

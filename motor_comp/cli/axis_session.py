@@ -1,4 +1,4 @@
-"""The axis's node processes during ``motor-comp autotune``, and this process's ROS client.
+"""``motor-comp autotune``'s node processes, and this process's ROS client.
 
 One :class:`AxisSession` holds, for the whole autotune:
 
@@ -31,20 +31,32 @@ seeing no reference, commands 0 V (observed on ``<ns>/voltage``) — a drive hol
 last command, so it is left at 0 V.  Every wait is for a condition (a process exit, a
 service reply, a message), bounded by a timeout that raises a one-line error.
 
+A drive is not a simulated plant that waits for its peers: it measures from power-on.
+So, with an external plant, the controller is configured when the session starts (its
+``voltage`` writer, kept for the node's life, is discovered by the drive long before
+anything moves), a run activates it only once the recorder reads ``joint_states``, the
+trajectory starts with the first measurement after the controller's first command
+(``wait_for_command``), each run is led in from where the axis stands (the tables of
+:func:`motor_comp.tuning.plan.segment_table`), and the recorder closes its file at once
+when stopped (the topics never go quiet).
+
 The process machinery (:class:`~motor_comp.cli.run.NodeGroup`, the private domain, the
-params files) is ``motor-comp run``'s, imported from :mod:`motor_comp.cli.run`.
+params files) is ``motor-comp run``'s; what the nodes are given is
+:class:`~motor_comp.tuning.spec.AxisSpec`.  :mod:`motor_comp.tuning.autotune` is given this
+class as its axis factory by ``motor-comp autotune``.
 """
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import os
 import time
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping
 
-from motor_comp.control.limits import Limits
-from motor_comp.errors import LimitTripError, MotorCompError, ParameterError
+from motor_comp.cli.run import TRIP_EXIT_STATUS, NodeGroup, require_ros, ros_environment, \
+    trip_reason, write_params_file
+from motor_comp.errors import LimitTripError, ParameterError
+from motor_comp.tuning.spec import AxisSpec, RunRecord, SessionError
 
 #: lifecycle transition a server refuses in every state: pings a client's reply path
 _NO_TRANSITION = 250
@@ -54,129 +66,6 @@ SERVICE_TIMEOUT = 120.0
 DRIVE_TIMEOUT = 30.0
 #: a run may take this much wall time beyond its sim time before it is abandoned [s]
 RUN_SLACK = 120.0
-#: the controller's ``stale_timeout`` in lockstep [s] (see :meth:`AxisSpec.controller_params`)
-LOCKSTEP_STALE_TIMEOUT = 30.0
-
-
-class SessionError(MotorCompError):
-    """The session's processes or the drive did not do what was asked (one line)."""
-
-
-@dataclasses.dataclass(frozen=True)
-class AxisSpec:
-    """What the session's nodes are given (SI units).
-
-    Attributes
-    ----------
-    plant : str or None
-        The simulated axis for ``plant_node`` (``pmlm``, ``ballscrew``, a plant YAML);
-        None: an external drive is the axis.
-    nominal : str
-        The controller's ``plant`` parameter: its nominal model and default gains.
-    controller : str
-        ``pid | adaptive_sliding | npid``.
-    timing : str
-        ``lockstep | realtime``.
-    control_rate : float
-        [Hz].
-    limits : Limits
-        Enforced by the controller (trip) and the trajectory (refusal).
-    model_dirs : tuple of str
-        Directories the nodes may read files from (``model_dir``).
-    monitor : bool
-        Start ``monitor_node`` with each run.
-    namespace : str
-        Topic namespace.
-    seed : int
-        Measurement-noise seed of a simulated plant.
-    realtime_priority : int
-        SCHED_FIFO priority of the loop processes in realtime (0: normal scheduling).
-    """
-
-    plant: str | None
-    nominal: str
-    controller: str
-    timing: str = 'lockstep'
-    control_rate: float = 1000.0
-    limits: Limits = dataclasses.field(default_factory=Limits)
-    model_dirs: tuple[str, ...] = ()
-    monitor: bool = False
-    namespace: str = 'axis'
-    seed: int = 0
-    realtime_priority: int = 0
-
-    @property
-    def external(self) -> bool:
-        """Tell whether an external drive (not a ``plant_node`` of ours) is the axis."""
-        return self.plant is None
-
-    @property
-    def lockstep(self) -> bool:
-        """Tell whether the simulated plant owns sim time (lockstep timing)."""
-        return self.timing == 'lockstep'
-
-    def _files(self) -> dict[str, str]:
-        return {'model_dir': os.pathsep.join(self.model_dirs)}
-
-    def controller_params(self) -> dict[str, Any]:
-        """Return the controller's parameters (fixed for the session)."""
-        lim = self.limits
-        return {'plant': self.nominal, 'mode': self.controller, 'feedforward': 'none',
-                'timing': self.timing, 'control_rate': float(self.control_rate),
-                'realtime_priority': int(self.realtime_priority), **self._files(),
-                'autostart': False, 'compensation_model': '',
-                # voltage readers: the plant (or the drive), the recorder, the monitor
-                'expected_subscribers': 2 + int(self.monitor),
-                'travel': [float(v) for v in lim.travel], 'vmax': lim.vmax,
-                'amax': lim.amax, 'umax': lim.umax, 'max_error': lim.max_error,
-                'exit_on_trip': True, 'diagnostics_readers': 1,
-                # lockstep: the simulated plant waits for every command, so a reference
-                # late by the node default (0.5 s of wall time, a trajectory process
-                # descheduled on a loaded machine) must not be answered with 0 V: that
-                # changed a ball-screw excitation mid-run (and this session watches the
-                # trajectory's process itself); realtime keeps the node's default
-                **({'stale_timeout': LOCKSTEP_STALE_TIMEOUT} if self.lockstep else {})}
-
-    def run_params(self, table_file: Path, *, duration: float, x0: float, output: Path,
-                   monitor_model: str = '') -> dict[str, dict[str, Any]]:
-        """Return the parameters of one run's processes (not the controller's)."""
-        common = {'timing': self.timing, 'control_rate': float(self.control_rate),
-                  'realtime_priority': int(self.realtime_priority)}
-        lim = self.limits
-        nodes = ['trajectory_node', 'controller_node']
-        params: dict[str, dict[str, Any]] = {
-            'trajectory_node': {**common, **self._files(), 'trajectory': 'table',
-                                'file': str(table_file), 'duration': float(duration),
-                                'exit_at_end': not self.lockstep,
-                                'travel': [float(v) for v in lim.travel],
-                                'vmax': lim.vmax, 'amax': lim.amax},
-            'recorder_node': {**self._files(), 'output': str(output),
-                              'timing': self.timing},
-        }
-        if self.external:
-            # a drive publishes joint_states for ever: the topics never go quiet, so the
-            # recorder closes its file at once when stopped (the run ended well before:
-            # the table's rest, then the controller's 0 V)
-            params['recorder_node']['drain_time'] = 0.0
-            # a drive measures from power-on: the trajectory's time starts only once the
-            # controller answers (its first command), not with the first measurement
-            params['trajectory_node']['wait_for_command'] = True
-        if not self.external:
-            nodes.insert(0, 'plant_node')
-            params['plant_node'] = {
-                **common, **self._files(), 'plant': self.plant, 'seed': int(self.seed),
-                'x0': float(x0),
-                # lockstep: the run ends with the plant; realtime: when the table does
-                'duration': float(duration) if self.lockstep else 0.0,
-                # joint_states readers: controller, recorder (+ the realtime trajectory,
-                # which takes its time origin from it) (+ the monitor)
-                'expected_subscribers': 2 + int(not self.lockstep) + int(self.monitor)}
-        if self.monitor:
-            nodes.append('monitor_node')
-            params['monitor_node'] = {**self._files(), 'model': monitor_model,
-                                      'timing': self.timing, 'diagnostics_readers': 1}
-        params['recorder_node']['nodes'] = ','.join(nodes)
-        return params
 
 
 @contextlib.contextmanager
@@ -315,25 +204,6 @@ class RosClient:
         return got[0]
 
 
-@dataclasses.dataclass(frozen=True)
-class RunRecord:
-    """One run of the session.
-
-    Attributes
-    ----------
-    path : Path
-        Its MCAP recording.
-    seconds : float
-        Wall time [s].
-    logs : tuple of Path
-        The node logs of the run.
-    """
-
-    path: Path
-    seconds: float
-    logs: tuple
-
-
 class AxisSession:
     """The controller for the whole autotune, the other processes per run (context manager).
 
@@ -345,26 +215,20 @@ class AxisSession:
         Where the params files and the node logs go (kept: the user's record).
     domain_id : int, optional
         ``ROS_DOMAIN_ID`` (default ``$ROS_DOMAIN_ID`` or a private one).
-    say : callable, optional
-        Progress lines.
     """
 
-    def __init__(self, spec: AxisSpec, logdir: Path, *, domain_id: int | None = None,
-                 say: Callable[[str], None] = lambda s: None) -> None:
+    def __init__(self, spec: AxisSpec, logdir: Path, *, domain_id: int | None = None
+                 ) -> None:
         self.spec = spec
         self.logdir = Path(logdir)
         self.domain_id = domain_id
-        self.say = say
         self.group: Any = None
         self.client: RosClient | None = None
         self._env_cm: Any = None
         self._configured = False
-        self.runs = 0
 
     # -- start and stop ------------------------------------------------------------------
     def __enter__(self) -> 'AxisSession':
-        from motor_comp.cli.run import NodeGroup, require_ros, ros_environment, \
-            write_params_file
         require_ros('motor-comp autotune')
         self.logdir.mkdir(parents=True, exist_ok=True)
         env = ros_environment(self.domain_id)
@@ -457,7 +321,6 @@ class AxisSession:
         Raises :class:`LimitTripError` (the controller's reason) after a trip, with the
         recording finalised; :class:`SessionError` when a process fails.
         """
-        from motor_comp.cli.run import TRIP_EXIT_STATUS, write_params_file
         spec = self.spec
         t_start = time.monotonic()
         params = spec.run_params(table_file, duration=duration, x0=x0, output=output,
@@ -486,7 +349,6 @@ class AxisSession:
         if code not in (0, None):
             raise SessionError(f'recorder_node exited with status {code}: '
                                f'{group.procs[labels["recorder_node"]].tail()}')
-        self.runs += 1
         logs = tuple(group.procs[label].log for label in labels.values())
         if tripped:
             raise LimitTripError(tripped)
@@ -518,12 +380,10 @@ class AxisSession:
             SERVICE_TIMEOUT, 'the recorder to read joint_states', check=check)
 
     def _trip_reason(self) -> str:
-        from motor_comp.cli.run import _trip_reason
-        return _trip_reason(self.group.procs['controller_node'])
+        return trip_reason(self.group.procs['controller_node'])
 
     def _wait_for_end(self, labels: Mapping[str, str], duration: float) -> str:
         """Wait for the run's end; return the trip reason ('' when it ended normally)."""
-        from motor_comp.cli.run import TRIP_EXIT_STATUS
         group = self.group
         ctl = group.procs['controller_node']
         # lockstep: the plant ends the run; realtime: the trajectory (exit_at_end)
@@ -574,4 +434,4 @@ class AxisSession:
             self.group.stop(label)
 
 
-__all__ = ['AxisSession', 'AxisSpec', 'RosClient', 'RunRecord', 'SessionError']
+__all__ = ['AxisSession', 'RosClient']
