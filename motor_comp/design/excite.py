@@ -372,6 +372,10 @@ class Design:
     stick_slip : float or None
         Fastest speed at which the start model stick-slips under the loop (None: none
         found on the ladder).
+    se_draws : dict
+        ``{effect: {param: [SE, …]}}`` — each of the :data:`PREDICT_RUNS` fits' SE, of
+        which ``predicted_se`` is the median (their scatter says how steadily a fit
+        reports the parameter on this excitation).
     """
 
     table: TableData
@@ -386,6 +390,7 @@ class Design:
     order: list
     creep: float = math.nan
     stick_slip: float | None = None
+    se_draws: dict = dataclasses.field(default_factory=dict)
 
     @property
     def speeds(self) -> list[float]:
@@ -400,7 +405,8 @@ class Design:
                            'fmax': _finite(self.limits.fmax),
                            'umax': _finite(self.limits.umax)},
                 'peaks': self.peaks.as_dict(), 'controller': self.loop.describe(),
-                'predicted_se': self.predicted_se, 'proxy_se': self.proxy_se,
+                'predicted_se': self.predicted_se, 'se_draws': self.se_draws,
+                'proxy_se': self.proxy_se,
                 'refit': self.refit.to_dict(), 'parts': self.parts,
                 'speeds_in_order': self.speeds, 'creep_speed': self.creep,
                 'stick_slip_speed': self.stick_slip,
@@ -725,7 +731,7 @@ def design(model: AxisModel, limits: ExcitationLimits, *, duration: float = 60.0
     parts = [{'kind': c.kind, 'level': c.level, 'count': counts[i],
               'seconds': counts[i] * c.seconds} for i, c in enumerate(scored)]
     return Design(table=data, limits=limits, peaks=pk, loop=loop, start=model,
-                  predicted_se=predicted, refit=result.model,
+                  predicted_se=predicted, se_draws=draws, refit=result.model,
                   proxy_se={n: float(s) for n, s in zip(names, proxy)}, parts=parts,
                   order=[(scored[i].kind, scored[i].level, *w)
                          for i, w in zip(order, windows)], creep=creep,

@@ -9,15 +9,17 @@ the truth in every parameter (a data sheet, a previous fit).
 
 A fit's reported SE is itself a statistic of one noisy run, so each prediction is
 compared with three recordings (own noise seeds).  Where the fit reports a parameter's
-SE steadily (the three within ×2.5 of each other: every parameter of the PMLM and the
+SE steadily (these three and the prediction's own five draws within ×2.5 of each
+other — three alone can agree by chance: the ball-screw's fc SE is 0.9–1.1 mN in one
+draw and 4.5 mN in the next: every parameter of the PMLM and the
 arm, the ball-screw's mass, viscous and dead time) the prediction is within 2× of their
 median.  The ball-screw's Coulomb and Stribeck SEs are not steady: over eight designs
 (``bench/excite_prediction.py``) three recordings of one table scatter up to ×5.4
 (fc) and ×15 (vs) — fs from 0.04 to 0.86 N while the estimates themselves scatter by
 0.16 N; each of the fit's SE components (cluster-robust, processing and re-measurement
 spreads) moves by ×10.  No prediction can be within 2× of such a draw; there the test
-asks that the prediction be a value the fit reports on these runs (within their range,
-widened 2× each way), which held in 8 of 8 designs.
+asks that the recordings' median fall within the range of the prediction's own draws
+(widened 2× each way).
 
 Also: the designed table keeps every limit (travel, vmax, amax, the drive force under
 the start model) and holds every regime (both directions, interleaved speeds from creep
@@ -98,12 +100,16 @@ def test_predicted_se_within_2x_of_recorded(name):
         assert set(params) == set(recorded[0][g])
         for k, se in params.items():
             draws = np.array([r[g][k] for r in recorded])
-            if draws.max() / draws.min() <= 2.5:      # the fit reports it steadily
+            # the fit reports it steadily: over the prediction's own draws and these
+            every = np.concatenate([draws, d.se_draws[g][k]])
+            if every.max() / every.min() <= 2.5:
                 steady.add((g, k))
                 ratio = se / float(np.median(draws))
                 assert 0.5 <= ratio <= 2.0, (name, g, k, se, draws)
-            else:
-                assert draws.min() / 2 <= se <= 2 * draws.max(), (name, g, k, se, draws)
+            else:   # the recordings fall where the prediction's own draws do (±2×)
+                own = np.asarray(d.se_draws[g][k])
+                assert own.min() / 2 <= float(np.median(draws)) <= 2 * own.max(), \
+                    (name, g, k, own, draws)
     assert steady >= case['steady'], (name, case['steady'] - steady)
 
 

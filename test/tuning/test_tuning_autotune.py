@@ -105,7 +105,9 @@ def test_autotune_ballscrew_from_a_bare_model_with_monitor(tmp_path, autotune,
     # holds along the task (monitor_node records /diagnostics in every run)
     diag = data['diagnostics']
     excite, fitted = diag['excite']['monitor'], diag['fitted']['monitor']
-    assert excite['statuses']['ERROR'] == excite['verdicts'] > 50
+    # (a window over a rest of the table may hold too little motion to judge: STALE)
+    assert excite['verdicts'] > 50 and not excite['statuses'].get('OK')
+    assert excite['statuses']['ERROR'] >= excite['verdicts'] - 2, excite['statuses']
     assert excite['candidate'] == 'coulomb'
     # every verdict OK once the monitor's 2 s window has filled (the first two, at 0.5 s
     # and 1 s, weigh the start at rest: ERROR for the true model's run alike)
