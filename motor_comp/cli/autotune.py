@@ -19,7 +19,7 @@ import json
 import sys
 from pathlib import Path
 
-from motor_comp.cli.common import add_json, finite_float, jsonable, positive_float
+from motor_comp.cli.common import add_json, add_limits, jsonable, positive_float
 from motor_comp.errors import ParameterError
 
 
@@ -56,20 +56,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                      f'{EXCITE_DURATION:g})')
     p.add_argument('--bandwidth', type=positive_float, default=BANDWIDTH, metavar='HZ',
                    help=f'highest frequency of the excitation [Hz] (default {BANDWIDTH:g})')
-    lim = p.add_argument_group(
-        'limits', 'enforced by the nodes throughout (a trip stops the axis at 0 V and '
-        'autotune with a one-line error, exit status 3); not given: travel = the task\'s '
-        'range ± 25 %%, vmax/amax = 1.5×/3× the task\'s peaks plus the encoder noise, '
-        'umax/max-error none; the excitation keeps a margin inside them')
-    lim.add_argument('--travel', nargs=2, type=finite_float, metavar=('MIN', 'MAX'),
-                     help='travel limits of the position [m]')
-    lim.add_argument('--vmax', type=positive_float, metavar='V', help='speed limit [m/s]')
-    lim.add_argument('--amax', type=positive_float, metavar='A',
-                     help='acceleration limit [m/s²]')
-    lim.add_argument('--umax', type=positive_float, metavar='U',
-                     help='voltage limit: the law asking for more trips [V]')
-    lim.add_argument('--max-error', type=positive_float, metavar='E',
-                     help='tracking-error limit |x_ref − x| [m]')
+    add_limits(p, 'enforced by the nodes throughout (a trip stops the axis at 0 V and '
+               'autotune with a one-line error, exit status 3); not given: travel = the task\'s '
+               'range ± 25 %, vmax/amax = 1.5×/3× the task\'s peaks plus the encoder noise, '
+               'umax/max-error none; the excitation keeps a margin inside them')
     p.add_argument('--monitor', action='store_true',
                    help='also run monitor_node (the start model during the excitation, the '
                         'fitted model during the task); its /diagnostics are recorded and '

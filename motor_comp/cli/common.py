@@ -47,6 +47,24 @@ def add_report(p: argparse.ArgumentParser, *,
     p.add_argument('--report', metavar='DIR', help=help)
 
 
+def add_limits(p: argparse.ArgumentParser, description: str) -> None:
+    """Add the axis limits' options (``--travel --vmax --amax --umax --max-error``).
+
+    One definition for ``run`` and ``autotune``, which enforce them the same way
+    (:class:`~motor_comp.control.limits.Limits`).
+    """
+    lim = p.add_argument_group('limits', description)
+    lim.add_argument('--travel', nargs=2, type=finite_float, metavar=('MIN', 'MAX'),
+                     help='travel limits of the position [m]')
+    lim.add_argument('--vmax', type=positive_float, metavar='V', help='speed limit [m/s]')
+    lim.add_argument('--amax', type=positive_float, metavar='A',
+                     help='acceleration limit [m/s²]')
+    lim.add_argument('--umax', type=positive_float, metavar='U',
+                     help='voltage limit: the law asking for more trips [V]')
+    lim.add_argument('--max-error', type=positive_float, metavar='E',
+                     help='tracking-error limit |x_ref − x| [m]')
+
+
 def check_output_file(path: str | os.PathLike, option: str) -> Path:
     """Check, before any long computation, that ``path`` can be created as a file.
 

@@ -42,7 +42,7 @@ from typing import Any, Mapping, Sequence
 
 import yaml
 
-from motor_comp.cli.common import add_json, check_output_file, finite_float, jsonable, \
+from motor_comp.cli.common import add_json, add_limits, check_output_file, jsonable, \
     positive_float
 from motor_comp.control.limits import Limits
 from motor_comp.errors import LimitTripError, MotorCompError, ParameterError
@@ -565,19 +565,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help='realtime mode: SCHED_FIFO priority 1..98 of the plant, trajectory '
                         'and controller processes (default 40 where permitted, else normal '
                         'scheduling with a warning; 0 = off)')
-    lim = p.add_argument_group(
-        'limits', 'enforced by the nodes: a trajectory beyond them is refused before the '
-        'run; during it the controller trips (0 V), the run stops and ends with a one-line '
-        'error (exit status 3), the recording kept; units of the axis (m or rad)')
-    lim.add_argument('--travel', nargs=2, type=finite_float, metavar=('MIN', 'MAX'),
-                     help='travel limits of the position [m]')
-    lim.add_argument('--vmax', type=positive_float, metavar='V', help='speed limit [m/s]')
-    lim.add_argument('--amax', type=positive_float, metavar='A',
-                     help='acceleration limit [m/s²]')
-    lim.add_argument('--umax', type=positive_float, metavar='U',
-                     help='voltage limit: the law asking for more trips [V]')
-    lim.add_argument('--max-error', type=positive_float, metavar='E',
-                     help='tracking-error limit |x_ref − x| [m]')
+    add_limits(p, 'enforced by the nodes: a trajectory beyond them is refused before the '
+               'run; during it the controller trips (0 V), the run stops and ends with a one-line '
+               'error (exit status 3), the recording kept; units of the axis (m or rad)')
     p.add_argument('--monitor', metavar='MODEL.yaml', default='',
                    help='also run monitor_node on this model; its /diagnostics are '
                         'recorded and summarised (JSON key monitor)')
