@@ -73,7 +73,7 @@ def main() -> int:
             seconds = {s['name']: s['duration'] for s in d['steps']}
             sim = (json.loads((work / plant / 'excite.json').read_text())['duration']
                    + 3 * 10.0)
-            found = ', '.join(s['effect'] for s in d['fit']['steps'] if s['effect'])
+            found = ', '.join(d['model']['effects'])      # the fitted model's effects
             met = (d['wall'] <= TARGET_S and d['recovered_rms'] >= 0.8
                    and d['recovered_glitch'] >= 0.7)
             ok &= met
