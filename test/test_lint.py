@@ -10,9 +10,7 @@ pydocstyle's property-decorator rule and would demand imperative-mood docstrings
 """
 from __future__ import annotations
 
-import contextlib
-import io
-import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -32,21 +30,23 @@ def _existing(paths: tuple[str, ...]) -> list[str]:
 def flake8_errors(paths: list[str]) -> list[str]:
     """flake8 findings (``file:line:col: code message``) over ``paths`` with setup.cfg."""
     try:
-        from ament_flake8.main import main_with_errors
+        import ament_flake8.main  # noqa: F401
     except ImportError:
         proc = subprocess.run([sys.executable, '-m', 'flake8', '--config', str(SETUP_CFG),
                                *paths], cwd=ROOT, capture_output=True, text=True)
         return proc.stdout.splitlines() + ([proc.stderr] if proc.returncode > 1 else [])
-    # ament scans the working directory for AMENT_IGNORE markers: keep that scan to the
-    # package tree instead of the virtual environment next to it
-    cwd = os.getcwd()
-    os.chdir(ROOT / 'motor_comp')
-    try:
-        with contextlib.redirect_stdout(io.StringIO()):
-            rc, errors = main_with_errors(argv=['--config', str(SETUP_CFG), *paths])
-    finally:
-        os.chdir(cwd)
-    return list(errors) if rc else []
+    # A fresh interpreter: flake8 forks a worker pool, and forking this test process
+    # (which holds threads from earlier tests, e.g. a Dask client's) can deadlock the
+    # pool -- seen once in CI as a 300 s hang.  ament scans its working directory for
+    # AMENT_IGNORE markers: keep that scan to the package tree, not the venv beside it.
+    proc = subprocess.run([sys.executable, '-m', 'ament_flake8.main', '--config',
+                           str(SETUP_CFG), *paths], cwd=ROOT / 'motor_comp',
+                          capture_output=True, text=True, timeout=240)
+    if proc.returncode == 0:
+        return []
+    # ament prints each finding as "path:line:col: code message" followed by context
+    found = [ln for ln in proc.stdout.splitlines() if re.match(r'^\S+:\d+:\d+: [A-Z]\d+ ', ln)]
+    return found or [proc.stderr.strip() or f'ament_flake8 exit status {proc.returncode}']
 
 
 def pep257_errors(paths: list[str]) -> list[str]:
