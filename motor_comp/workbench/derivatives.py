@@ -1,7 +1,7 @@
 """Zero-phase kinematics of a measured run: uniform resampling, smoothing, derivatives.
 
 The inverse model ``r = F_in − M·ẍ − Σ F_k`` needs velocity and acceleration from a
-quantized, noisy position.  We use a Savitzky–Golay filter (``scipy.signal.savgol_filter``:
+quantized, noisy position.  We use a Savitzky–Golay filter (:mod:`motor_comp.workbench.savgol`:
 a centred least-squares polynomial, hence zero phase) for the position, velocity and
 acceleration, and apply the *same* smoothing to every force that enters the residual, so
 the two sides of the balance have the same bandwidth (otherwise the unsmoothed command
@@ -18,10 +18,9 @@ import enum
 import functools
 
 import numpy as np
-from scipy.signal import savgol_filter
-
 from motor_comp.errors import InputFileError, ParameterError
 from motor_comp.logs.run import Run
+from motor_comp.workbench.savgol import savgol_filter
 
 
 class InputHold(enum.Enum):

@@ -41,9 +41,9 @@ import math
 import numpy as np
 from numba import njit
 from scipy.ndimage import correlate1d
-from scipy.signal import savgol_coeffs
 
 from motor_comp.workbench.derivatives import Kinematics
+from motor_comp.workbench.savgol import savgol_coeffs
 
 _COEFFS: dict = {}
 
@@ -52,7 +52,7 @@ def _coeffs(window: int, polyorder: int, deriv: int = 0) -> np.ndarray:
     key = (window, polyorder, deriv)
     c = _COEFFS.get(key)
     if c is None:
-        c = savgol_coeffs(window, polyorder, deriv=deriv, use='dot')
+        c = savgol_coeffs(window, polyorder, deriv=deriv)
         _COEFFS[key] = c
     return c
 

@@ -27,7 +27,6 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.fft import next_fast_len
-from scipy.signal import welch
 
 from motor_comp.physics.axis import Units
 from motor_comp.workbench.dataset import Dataset
@@ -220,6 +219,24 @@ def _scans(vars_: dict, r: np.ndarray, fold: np.ndarray, folds: int) -> dict:
     return out
 
 
+def _welch(seg: np.ndarray, fs: float, nper: int) -> tuple[np.ndarray, np.ndarray]:
+    """Welch power spectral density of ``seg`` [unit²/Hz] at frequencies [Hz].
+
+    scipy.signal.welch's defaults (periodic Hann window, half overlap, each window's
+    mean removed, one-sided density), written here because importing ``scipy.signal``
+    costs every diagnosis ~0.45 s of CPU (see :mod:`motor_comp.workbench.savgol`); the
+    tests compare the two.
+    """
+    win = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(nper) / nper)
+    step = nper - nper // 2
+    starts = np.arange(0, len(seg) - nper + 1, step)
+    frames = seg[starts[:, None] + np.arange(nper)[None, :]]
+    frames = (frames - frames.mean(axis=1, keepdims=True)) * win
+    p = np.mean(np.abs(np.fft.rfft(frames, axis=1)) ** 2, axis=0) / (fs * float(win @ win))
+    p[1:None if nper % 2 else -1] *= 2.0      # one-sided: all but DC and Nyquist doubled
+    return np.fft.rfftfreq(nper, 1.0 / fs), p
+
+
 def _tone(data: Dataset, r: np.ndarray, t: np.ndarray) \
         -> tuple[float, float, float, np.ndarray]:
     """Return the residual's strongest tone: frequency [Hz], half-width [Hz], share, fit.
@@ -246,7 +263,7 @@ def _tone(data: Dataset, r: np.ndarray, t: np.ndarray) \
     psd = None
     f = np.zeros(0)
     for seg in segs:
-        f, p = welch(seg - seg.mean(), fs=fs, nperseg=nper)
+        f, p = _welch(seg - seg.mean(), fs, nper)
         psd = p * len(seg) if psd is None else psd + p * len(seg)
     if psd is None or len(psd) < 4 or psd[1:].sum() <= 0:
         return none

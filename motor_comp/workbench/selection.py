@@ -373,7 +373,7 @@ def select(eng: Engine, est: Estimate, step: Step, say: Callable[[str], None],
         scored = [eng.score(est, n) for n in names]
         ok = [c for c in scored if c.supported]
         if ok:
-            best = simpler(eng, est, min(ok, key=lambda c: c.bic_delta), ok)
+            best = simpler(eng, est, min(ok, key=lambda c: c.bic_delta), scored)
         else:
             best = pair(eng, est, scored)
             if best is None:
@@ -417,28 +417,33 @@ def restructure(eng: Engine, est: Estimate, step: Step) -> Estimate:
 
 
 def simpler(eng: Engine, est: Estimate, best: CandidateResult,
-            ok: Sequence[CandidateResult]) -> CandidateResult:
-    """Return a simpler candidate when two simpler ones together beat the best (BIC).
+            scored: Sequence[CandidateResult]) -> CandidateResult:
+    """Return a simpler candidate when it and a second simple one together beat the best.
 
     A flexible term (many parameters) can take the shape of two simple ones at once:
     friction knots along the travel are, on a sine, also a function of the speed, and
     win a greedy step against a viscous term and a Stribeck curve that the run shows
-    together.  The two strongest supported candidates with fewer parameters are fitted
-    in turn; when together they improve the held-out BIC more than the flexible one
-    alone, the first of them is taken (the second is judged in the next step).
+    together.  Each of the two strongest supported candidates with fewer parameters is
+    fitted in turn and every other candidate with fewer parameters than the flexible
+    one is scored on top of it — also those that did not pay alone: a Stribeck rise
+    does not, before the viscous slope it sits on is in the model.  When a pair
+    improves the held-out BIC more than the flexible term alone, its first term is
+    taken (the second is judged in the next step).
     """
-    lighter = sorted((c for c in ok if c.n_params < best.n_params),
+    lighter = sorted((c for c in scored if c.supported and c.n_params < best.n_params),
                      key=lambda c: c.bic_delta)[:2]
-    if len(lighter) < 2:
-        return best
-    a, b = lighter
-    first = estimate(eng.data_for(a.spec), a.spec, a.model)
-    if b.effect in first.spec.names or b.effect not in candidates(first.spec, eng.data):
-        return best
-    second = eng.score(first, b.effect)
-    if not second.supported:
-        return best
-    return a if a.bic_delta + second.bic_delta < best.bic_delta else best
+    # a term's parameter count as this round scored it
+    size = {c.effect: c.n_params for c in scored}
+    choice, total = best, best.bic_delta
+    for a in lighter:
+        first = estimate(eng.data_for(a.spec), a.spec, a.model)
+        for n in candidates(first.spec, eng.data):
+            if n == best.effect or size.get(n, best.n_params) >= best.n_params:
+                continue
+            second = eng.score(first, n)
+            if second.supported and a.bic_delta + second.bic_delta < total:
+                choice, total = a, a.bic_delta + second.bic_delta
+    return choice
 
 
 def pair(eng: Engine, est: Estimate, scored: Sequence[CandidateResult]) \

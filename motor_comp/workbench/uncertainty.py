@@ -122,8 +122,12 @@ def sandwich(data: Dataset, J: np.ndarray, e: np.ndarray) -> np.ndarray:
         except np.linalg.LinAlgError:
             return np.full((p, p), np.nan)
         deltas[c] = Ai @ (Jc.T @ e[m])
-    deltas -= deltas.mean(axis=0)
-    return (G - 1) / G * deltas.T @ deltas
+    # a cluster without which the columns are (nearly) singular throws its estimate
+    # out of range: no standard error can be read from such a jackknife
+    with np.errstate(over='ignore', invalid='ignore'):
+        deltas -= deltas.mean(axis=0)
+        cov = (G - 1) / G * deltas.T @ deltas
+    return cov if np.all(np.isfinite(cov)) else np.full((p, p), np.nan)
 
 
 def block_sandwich(data: Dataset, J: np.ndarray, e: np.ndarray) -> np.ndarray:
@@ -172,7 +176,8 @@ def delta_se(fn: Callable[[Mapping], float], vals: Mapping, idx: Mapping,
         v2 = dict(vals)
         v2[lab] = vals[lab] + h
         g[i] = (fn(v2) - base) / h
-    var = float(g @ cov @ g)
+    with np.errstate(over='ignore', invalid='ignore'):
+        var = float(g @ cov @ g)
     return math.sqrt(var) if var > 0 and np.isfinite(var) else float('nan')
 
 

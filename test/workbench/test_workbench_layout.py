@@ -64,3 +64,17 @@ def test_every_effect_owns_its_term_and_no_fitter_per_effect_is_left():
         fitters = [n.name for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)
                    and n.name.startswith('fit_') and n.name[4:] in VOCABULARY]
         assert not fitters, (path.name, fitters)
+
+
+def test_the_commands_do_not_import_scipy_signal():
+    # scipy.signal (and scipy.stats, which it imports) cost every command ~0.45 s of CPU,
+    # more than a whole diagnosis of a 20 s run: the workbench computes its two uses
+    # (Savitzky-Golay, Welch) itself, and this keeps a stray import from coming back
+    import subprocess
+    import sys
+    code = ('import sys, motor_comp.workbench, motor_comp.cli.main; '
+            'bad = sorted(m for m in ("scipy.signal", "scipy.stats") if m in sys.modules); '
+            'print(",".join(bad))')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == '', f'imported at start-up: {out}'

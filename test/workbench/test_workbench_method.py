@@ -240,11 +240,6 @@ HSM = sorted(glob.glob('/work/shared/data/hsm150/idf_*.mat')) or sorted(glob.glo
 
 
 @pytest.mark.skipif(not HSM, reason='HSM150 data not available')
-@pytest.mark.xfail(strict=True, reason=(
-    'known miss since selection by principle (issue 22 note): every run moves one way, '
-    'so on their sliding rows an offset is the column of the asymmetry\'s dfc and is '
-    'taken first; the asymmetry\'s dfv then lowers the held-out NRMSE by 0.57 %, under '
-    'the 1 % a term must pay (two and twelve runs find it: test_workbench_realdata)'))
 def test_hsm150_direction_dependent_viscous_friction_from_several_runs():
     """Real data: positive and negative runs together (one experiment, one model)."""
     from motor_comp.logs.importers import import_table

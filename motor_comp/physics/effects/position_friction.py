@@ -259,8 +259,10 @@ class PositionFriction(Effect):
         out = np.zeros((x.shape[0], n))
         # the Hermite weights of spline_sum: the values at lo/hi and, through the
         # slopes m = S·dfc, every knot value
-        np.add.at(out, (rows, lo), (1.0 + 2.0 * t) * s * s)
-        np.add.at(out, (rows, hi), t * t * (3.0 - 2.0 * t))
+        # one (row, lo) and one (row, hi) pair per row, lo != hi: plain fancy-index
+        # assignment is exact here (np.add.at was 5x slower inside the searches)
+        out[rows, lo] = (1.0 + 2.0 * t) * s * s
+        out[rows, hi] = t * t * (3.0 - 2.0 * t)
         out += (h * t * s * s)[:, None] * slopes[lo] - (h * t * t * s)[:, None] * slopes[hi]
         return out
 
