@@ -247,6 +247,9 @@ def _screen(model: AxisModel, kin: Kinematics, base: _Residual) \
     skipped: list[tuple[str, str]] = []
     best: tuple[float, Candidate] | None = None
 
+    #: each candidate's columns, residual and parameter count (for the nested check)
+    kept: dict[int, tuple[_Residual, np.ndarray, int]] = {}
+
     def consider(name: str, res: _Residual, cols: np.ndarray, labels: list,
                  n_nonlinear: int) -> tuple[float, Candidate] | None:
         sse0 = float(res.r @ res.r)
@@ -254,20 +257,24 @@ def _screen(model: AxisModel, kin: Kinematics, base: _Residual) \
             return None
         theta, sse = _fit(cols, res.r)
         explained = 1.0 - sse / sse0
-        n_eff = max(res.data.n_eff, 2.0)
-        score = explained - (len(labels) + n_nonlinear) * math.log(n_eff) / n_eff
+        score = explained - (len(labels) + n_nonlinear) * _price(res)
         present = name == MASS[0] or model.has(name)
-        return score, Candidate(effect=name, status='changed' if present else 'missing',
-                                explained=max(explained, 0.0),
-                                change={k: float(v) for k, v in zip(labels, theta)})
+        cand = Candidate(effect=name, status='changed' if present else 'missing',
+                         explained=max(explained, 0.0),
+                         change={k: float(v) for k, v in zip(labels, theta)})
+        kept[id(cand)] = (res, cols, len(labels) + n_nonlinear)
+        return score, cand
 
     def better(a: tuple[float, Candidate] | None, b: tuple[float, Candidate] | None) \
             -> tuple[float, Candidate] | None:
         return b if a is None or (b is not None and b[0] > a[0]) else a
 
+    changed: list[tuple[float, Candidate]] = []
     view = base.design.view
-    best = better(best, consider(MASS[0], base, view.signal(Signal.ACCELERATION)[:, None],
-                                 [MASS[1]], 0))
+    mass = consider(MASS[0], base, view.signal(Signal.ACCELERATION)[:, None], [MASS[1]], 0)
+    best = better(best, mass)
+    if mass is not None:
+        changed.append(mass)
     for name, t in TERMS.items():
         why = _unscreenable(name, t, spec, data.summary)
         if why is not None:
@@ -300,8 +307,45 @@ def _screen(model: AxisModel, kin: Kinematics, base: _Residual) \
         if own is None and starts:
             skipped.append((name, f'{name} has no column at its start'))
         best = better(best, own)
+        if own is not None and own[1].status == 'changed':
+            changed.append(own)
+    best = _prefer_change(best, changed, kept)
     cand = best[1] if best is not None and best[1].explained > 0 else None
     return cand, tuple(skipped)
+
+
+def _price(res: _Residual) -> float:
+    """Return the share of the residual one parameter must remove (BIC-like)."""
+    n_eff = max(res.data.n_eff, 2.0)
+    return math.log(n_eff) / n_eff
+
+
+def _prefer_change(best: tuple[float, Candidate] | None,
+                   changed: list[tuple[float, Candidate]], kept: dict) \
+        -> tuple[float, Candidate] | None:
+    """Name a change of the model's own term unless a new term explains more than it can.
+
+    A level shift of friction is the Coulomb level changed, and also, nearly, a term
+    the model lacks that contains a level (friction growing with the load while the
+    load is steady, friction along a short stretch of travel): the screen's scores of
+    the two are then within noise of each other.  The nested test decides: the new
+    term is named only when, fitted together with the best change of the model's own
+    terms on the same rows, it still removes more than its price per parameter.
+    """
+    if best is None or best[1].status != 'missing' or not changed:
+        return best
+    res_n, x_n, p_n = kept[id(best[1])]
+    for score, cand in sorted(changed, key=lambda c: -c[0]):
+        res_c, x_c, _ = kept[id(cand)]
+        if res_c is not res_n:
+            continue          # judged on other rows: no joint fit
+        sse0 = float(res_n.r @ res_n.r)
+        _, sse_c = _fit(x_c, res_n.r)
+        _, sse_j = _fit(np.column_stack([x_c, x_n]), res_n.r)
+        if (sse_c - sse_j) / sse0 < p_n * _price(res_n):
+            return score, cand
+        return best
+    return best
 
 
 def window_health(t: np.ndarray, position: np.ndarray, command: np.ndarray,

@@ -202,3 +202,35 @@ def test_monitor_bad_start_parameters(tmp_path, nodes, params, needle):
     assert nodes.wait('monitor_node', 60) == 2
     log = _log(nodes, 'monitor_node')
     assert needle in log and 'Traceback' not in log, log
+
+
+@pytest.mark.parametrize('seed', range(5))
+def test_a_change_of_the_models_own_term_is_preferred_to_a_nested_new_one(seed):
+    """The nested test of the screen (issue 23 note): a term the model lacks whose column
+    holds the level a change of the model's own term explains is named only when it
+    removes more than its price on top of that change."""
+    import types
+
+    import numpy as np
+
+    from motor_comp.workbench.monitor import Candidate, _prefer_change
+
+    rng = np.random.default_rng(seed)
+    n = 2000
+    sgn = np.sign(np.sin(np.linspace(0.0, 12.0 * np.pi, n)))
+    load = 20.0 + rng.normal(0.0, 0.3, n)            # a steady drive force [N]
+    r = 6.0 * sgn + rng.normal(0.0, 0.5, n)          # a friction level shift + noise
+    res = types.SimpleNamespace(r=r, data=types.SimpleNamespace(n_eff=float(n)))
+    own = Candidate('coulomb', 'changed', 0.9, {'fc': 6.0})
+    new = Candidate('load_friction', 'missing', 0.91, {'mu': 0.3})
+    kept = {id(own): (res, sgn[:, None], 1), id(new): (res, (load * sgn)[:, None], 1)}
+    # scored a hair higher, the nested term adds nothing beyond the change: the change
+    assert _prefer_change((0.91, new), [(0.9, own)], kept)[1] is own
+    # a load dependence the level cannot explain: the new term is named
+    r2 = 6.0 * sgn + 0.5 * (load - 20.0) * sgn * 10.0 + rng.normal(0.0, 0.5, n)
+    res2 = types.SimpleNamespace(r=r2, data=res.data)
+    kept2 = {id(own): (res2, sgn[:, None], 1), id(new): (res2, (load * sgn)[:, None], 1)}
+    assert _prefer_change((0.95, new), [(0.9, own)], kept2)[1] is new
+    # judged on other rows: no joint fit, the scores decide
+    kept3 = {id(own): (res, sgn[:, None], 1), id(new): (res2, (load * sgn)[:, None], 1)}
+    assert _prefer_change((0.91, new), [(0.9, own)], kept3)[1] is new
