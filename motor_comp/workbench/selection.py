@@ -310,6 +310,18 @@ class Engine:
         floor = self.floor_sse(base, D)
         ok, explained, b = self.pays(sse0, sse, dp, D, floor=floor)
         why_not = est.inadmissible.get(name, '')
+        if not ok and not why_not and explained >= self.min_gain and any(
+                TERMS[n].params and not _vector(TERMS[n], D) for n in base.spec.names):
+            # its gain is judged at the model's best nonlinear parameters with it, not
+            # at those chosen without it: a viscous slope under a Stribeck curve whose
+            # vs and delta had stretched to imitate it pays only once they move back
+            full = research(self, estimate(D, spec, base.model), name)
+            if full.sse_cv < sse:
+                ok2, explained2, b2 = self.pays(sse0, full.sse_cv, dp, D, floor=floor)
+                if ok2 and not full.inadmissible.get(name, ''):
+                    ok, explained, b, sse, spec = ok2, explained2, b2, full.sse_cv, full.spec
+                    est = estimate(D, spec, base.model, cv=False)
+        why_not = est.inadmissible.get(name, '')
         if why_not:
             ok = False
         eff = est.model.get(name)
