@@ -126,8 +126,11 @@ def test_search_spaces_follow_the_sensor_and_the_record():
     vs, delta = TERMS['stribeck'].space(s, ctx)
     assert max(vs.grid) <= 0.1 * s.speeds[95] + 1e-12
     (period,) = TERMS['ripple'].space(s, ctx)
-    assert period.hi == pytest.approx(s.travel / 3)
+    assert period.hi == pytest.approx(s.travel / 2)              # two periods seen
     assert math.isfinite(period.lo) and period.lo > 0
+    # harmonics need three periods over the travel; the fundamental two
+    assert TERMS['ripple'].orders(s, {'period': 0.45 * s.travel}) == (1, 1)
+    assert TERMS['ripple'].orders(s, {'period': 0.3 * s.travel})[1] > 1
 
 
 def test_gms_columns_times_the_levels_are_the_effects_own_law():

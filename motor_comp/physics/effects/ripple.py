@@ -184,12 +184,17 @@ def spatial_spectrum(x: np.ndarray, r: np.ndarray, *, n_bins: int | None = None)
 MAX_FIT_HARMONICS = 6
 
 
+#: least periods over the travel for a ripple (a sinusoid), and for its harmonics
+PERIODS_SEEN = 2.0
+PERIODS_SEEN_HARMONICS = 3.0
+
+
 class RippleTerm(Term):
     """Identification of force ripple: harmonics on ``sin/cos(h·2πx/period)``.
 
     The period starts at the largest peak of the residual's spatial spectrum between
-    eight position bins (or four samples per period at the high speeds) and a third of
-    the travel (at least three periods seen), and is refined by variable projection
+    eight position bins (or four samples per period at the high speeds) and half the
+    travel (two periods seen; three for harmonics), and is refined by variable projection
     within ``±1.5·p²/span`` (the spectrum's resolution); the harmonic count (the
     term's order, 1–6, at least four samples per period at the median speed) by an
     information criterion.  Each column is position-periodic: the workbench averages
@@ -205,8 +210,12 @@ class RippleTerm(Term):
         return max(8.0 * s.travel / n_bins, 4.0 * s.dt * float(s.speeds[90]), 1e-12)
 
     def space(self, s: Summary, ctx: Context) -> tuple[Param, ...]:
-        """Return ``period`` [m] (no grid: the start comes from the spectrum)."""
-        hi = max(s.travel / 3.0, 2.0 * self._min_period(s))
+        """Return ``period`` [m] (no grid: the start comes from the spectrum).
+
+        Up to half the travel: two periods seen tell a sinusoid from a shape along the
+        travel; its harmonics need three (:meth:`orders`).
+        """
+        hi = max(s.travel / PERIODS_SEEN, 2.0 * self._min_period(s))
         return (Param('period', self._min_period(s), hi, resolved=True),)
 
     def bracket(self, value: float, s: Summary) -> tuple[float, float]:
@@ -226,6 +235,10 @@ class RippleTerm(Term):
     def orders(self, s: Summary, eta: Mapping) -> tuple[int, int]:
         """Return the harmonic counts allowed at the period (four samples per period)."""
         min_p = max(4.0 * s.dt * float(s.speeds[50]), 1e-12)
+        if float(eta['period']) > s.travel / PERIODS_SEEN_HARMONICS:
+            # fewer than three periods seen: harmonics of a long period would draw any
+            # shape along the travel (a bump the library lacks) twice over
+            return 1, 1
         return 1, max(1, min(MAX_FIT_HARMONICS, int(math.floor(float(eta['period']) / min_p))))
 
     def order_of(self, eta: Mapping) -> int:
@@ -241,7 +254,7 @@ class RippleTerm(Term):
         x, r = profile
         spec = spatial_spectrum(x, r)
         min_p = max(8 * spec.bin_width, 4.0 * s.dt * float(s.speeds[90]))
-        max_p = spec.span / 3.0
+        max_p = spec.span / PERIODS_SEEN
         f, amp = spec.frequency, spec.amplitude
         ok = (f >= 1.0 / max_p) & (f <= 1.0 / min_p) if max_p > min_p else f < 0
         if not np.any(ok):
@@ -251,7 +264,8 @@ class RippleTerm(Term):
         a1 = spec.amplitude_at(1.0 / p0)
         floor = float(np.median(amp))
         nh = 1
-        for h in range(2, MAX_FIT_HARMONICS + 1):
+        for h in range(2, MAX_FIT_HARMONICS + 1 if p0 <= spec.span / PERIODS_SEEN_HARMONICS
+                       else 2):
             if h / p0 > 1.0 / min_p:
                 break
             ah = spec.amplitude_at(h / p0)
