@@ -10,14 +10,16 @@ NODES = ('trajectory_node', 'plant_node', 'controller_node', 'recorder_node', 'm
 setup(
     name=PACKAGE,
     version='0.1.0',
-    packages=find_packages(include=[PACKAGE, PACKAGE + '.*']),
+    # config/ holds data (plant defaults, node parameters), not code: named as a package
+    # so that setuptools ships it without warning of an importable folder left out
+    packages=find_packages(include=[PACKAGE, PACKAGE + '.*']) + [PACKAGE + '.config'],
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
         ('share/' + PACKAGE + '/config', sorted(glob('config/*.yaml'))),
         ('share/' + PACKAGE + '/launch', sorted(glob('launch/*.py'))),
     ],
-    package_data={PACKAGE: ['config/*.yaml']},
+    package_data={PACKAGE + '.config': ['*.yaml']},
     include_package_data=True,
     python_requires='>=3.10,<3.13',
     install_requires=[
@@ -71,7 +73,6 @@ setup(
     description=('Precision servo axis simulation, friction/ripple compensation and '
                  'model workbench'),
     license='Apache-2.0',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'motor-comp = motor_comp.cli.main:main',
