@@ -32,8 +32,8 @@ from motor_comp.workbench.aliases import ambiguities
 from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.library import ORDER
 from motor_comp.workbench.residual import Residual, residual
+from motor_comp.workbench.result import CandidateResult
 from motor_comp.workbench.scan import scan
-from motor_comp.workbench.selection import CandidateResult
 from motor_comp.workbench.wording import LINEAR_UNITS, MASS, REFIT, common_scale, \
     experiment_notes, gain_note, identifiability_notes
 

@@ -1,5 +1,7 @@
 """A spec fitted on all rows: the model, its parameters, uncertainties and held-out score.
 
+:class:`CandidateResult` is one candidate effect scored by the selection and fitted in.
+
 :func:`estimate` is the one place a design becomes a result: bounded least squares on
 all rows, the held-out score over the validation folds, the jackknife covariance and
 the reported parameters with their standard errors (:mod:`.uncertainty`), the model-file
@@ -14,7 +16,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from motor_comp.physics.axis import AxisModel
+from motor_comp.physics.axis import AxisKind, AxisModel, Units
 from motor_comp.physics.effects import TERMS
 from motor_comp.workbench.dataset import Dataset, SpeedWeights
 from motor_comp.workbench.library import Spec, context, design, encode, n_params
@@ -22,6 +24,7 @@ from motor_comp.workbench.lsq import solve_gram
 from motor_comp.workbench.uncertainty import block_sandwich, correlations, jacobian, \
     sandwich, scalars_and_se
 from motor_comp.workbench.varpro import cv_design
+from motor_comp.workbench.wording import MASS, REFIT, ROTARY_UNITS, TITLES, fmt_param, more_words
 
 
 @dataclasses.dataclass(frozen=True)
@@ -126,4 +129,87 @@ def replace(est: Estimate, **changes: Any) -> Estimate:
     return dataclasses.replace(est, **changes)
 
 
-__all__ = ['Estimate', 'estimate', 'replace']
+@dataclasses.dataclass(frozen=True)
+class CandidateResult:
+    """One candidate's held-out score and its joint fit on all data.
+
+    Parameters
+    ----------
+    effect : str
+        Vocabulary name, ``'mass'`` (only the mass was wrong) or ``'refit'``.
+    explained : float
+        Held-out fraction of the refitted baseline's residual energy removed.
+    force_nrmse : float
+        Held-out force NRMSE with the candidate.
+    params : dict
+        Physical parameters of the effect (model-file form, SI).
+    uncertainty, scalars : dict[str, float]
+        Reported parameters and their standard errors.
+    n_params : int
+        Parameters it adds.
+    bic_delta : float
+        Held-out BIC change (< 0 pays for the parameters).
+    supported : bool
+        Whether it pays for its parameters.
+    model : AxisModel
+        The jointly refitted model with the candidate.
+    changes : tuple of ParameterChange
+        Parameters of the model that moved significantly in the joint refit.
+    why_not : str
+        Why it is outside its declared domain ('' when inside).
+    """
+
+    effect: str
+    explained: float
+    force_nrmse: float
+    params: dict
+    uncertainty: dict
+    scalars: dict
+    n_params: int
+    bic_delta: float
+    supported: bool
+    model: AxisModel
+    changes: tuple = ()
+    units: Units = Units.of(AxisKind.LINEAR)
+    correlations: tuple = ()
+    spec: Any = None
+    at_bound: bool = False
+    why_not: str = ''
+    estimate: Any = None
+
+    @property
+    def title(self) -> str:
+        """Human name of the candidate."""
+        return TITLES.get(self.effect, self.effect)
+
+    def sentence(self, *, rotary: bool | None = None) -> str:
+        """Return the finding in plain words, e.g. 'force ripple, period 7.25 mm, …'."""
+        u = ROTARY_UNITS if rotary else self.units
+        if self.effect in (MASS, REFIT):
+            what = '; '.join(ch.sentence(u) for ch in self.changes) or 'parameters refitted'
+            body = f'{self.title}: {what}'
+        else:
+            parts = [fmt_param(self.effect, k, v, self.uncertainty.get(k), u)
+                     for k, v in self.scalars.items()]
+            parts.append(more_words(self.effect, self.model, u))
+            body = f'{self.title}, {", ".join(p for p in parts if p)}'
+        verdict = ''
+        if self.supported and self.why_not:
+            verdict = f' ({self.why_not})'
+        elif not self.supported:
+            verdict = (f' (not supported: {self.why_not})' if self.why_not else
+                       ' (not supported: does not pay for its parameters on held-out data)')
+        return f'{body}, removes {100 * self.explained:.0f} % of the residual{verdict}'
+
+    def as_dict(self) -> dict[str, Any]:
+        """Return the JSON form (DESIGN.md §6 ``candidates`` entry)."""
+        return {'effect': self.effect, 'title': self.title,
+                'explained': float(self.explained), 'force_nrmse': float(self.force_nrmse),
+                'params': self.params, 'uncertainty': self.uncertainty,
+                'n_params': self.n_params, 'bic_delta': float(self.bic_delta),
+                'supported': bool(self.supported), 'summary': self.sentence(),
+                'changes': [ch.as_dict() for ch in self.changes],
+                'model': self.model.to_dict()}
+
+
+__all__ = ['CandidateResult', 'Estimate', 'estimate', 'replace']
