@@ -518,6 +518,8 @@ class ControllerNode(ManagedNode):
 
     def _tripped_step(self, t_ns: int) -> None:
         """After a trip: answer every new measurement with 0 V; exit after the hold."""
+        if self._finished:
+            return   # the hold is over: the plant holds the last command (0 V)
         if self.timing is Timing.REALTIME:
             last = self._last_meas_ns
             if last is not None and t_ns <= last:
