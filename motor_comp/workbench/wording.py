@@ -90,10 +90,15 @@ def fmt_param(effect: str, key: str, value: float, se: float | None, u: Units) -
     """Return ``'fc 10.0 ± 0.1 N'`` in the axis units."""
     unit, k = unit_of(effect, key, u)
     txt = f'{key} {value * k:.4g}'
-    if se is not None and np.isfinite(se) and se > 0:
+    # an SE beyond the value itself (e.g. a GMS attraction rate on a run whose turns
+    # never leave pre-sliding slowly: ± 2e+15 1/s) is no error bar: say what it means
+    unresolved = se is not None and not np.isnan(se) and se >= abs(value) > 0
+    if se is not None and np.isfinite(se) and se > 0 and not unresolved:
         txt += f' ± {se * k:.2g}'
     if unit:
         txt += f' {unit}'
+    if unresolved:
+        txt += ' (not resolved by this run)'
     if effect == 'ripple' and key == 'period' and u.rotary and value > 0:
         txt += f' ({2 * math.pi / value:.3g} cycles/rev)'
     return txt
