@@ -27,6 +27,7 @@ the grid and a neighbourhood of the all-data choice.
 """
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from typing import Any, Mapping, Sequence
@@ -36,7 +37,7 @@ from scipy.optimize import minimize, minimize_scalar
 
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import TERMS
-from motor_comp.physics.effects.identification import Param, Term
+from motor_comp.physics.effects.identification import MASS, Param, Term
 from motor_comp.workbench.dataset import Dataset, SpeedWeights
 from motor_comp.workbench.library import Spec, context, design, values_of
 from motor_comp.workbench.lsq import bic, cv_grams, solve_gram, sse_with
@@ -445,6 +446,57 @@ def fold_trials(data: Dataset, spec: Spec, name: str, eta_all: Mapping) -> list[
     return list(uniq.values())
 
 
+#: share of what a term explains on the stretches it was fitted on that it must also
+#: explain on stretches it did not see, to count as repeating along the travel (a bump
+#: drawn by harmonics: 8.5 % held out of 79 % seen; a ripple: nearly all of it)
+REPEATS = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class BlockCV:
+    """A term's SSE on position blocks: held out, seen (fitted on all), and without it."""
+
+    held: float
+    seen: float
+    nothing: float
+
+    @property
+    def repeats(self) -> bool:
+        """Whether the held-out gain is at least :data:`REPEATS` of the seen gain."""
+        return self.nothing - self.held >= REPEATS * (self.nothing - self.seen) > 0.0
+
+
+def block_cv(data: Dataset, spec: Spec, name: str, model: AxisModel | None,
+             length: float, *, rows: np.ndarray | None = None,
+             weights: SpeedWeights | None = None) -> BlockCV:
+    """Return how well term ``name`` predicts blocks of ``length`` along the travel.
+
+    The spec without the term is fitted on all rows (``rows``: a subset), and the
+    term's own columns, fitted to its residual on all blocks but one, predict that
+    one (:class:`BlockCV`).  A force periodic in position fitted on some periods
+    predicts the others; a shape at one place (a bump) does not.  The other
+    terms are not extrapolated: a spring fitted without the end of the travel would
+    mispredict it for reasons of its own.  All ``inf`` under two blocks.
+    """
+    d = design(data, spec, model, weights=weights)
+    x = d.view.gather(lambda p, mo: mo.x)
+    keep = np.ones(len(x), dtype=bool) if rows is None else rows
+    block = np.floor((x - x[keep].min()) / max(length, 1e-300)).astype(np.int64)
+    blocks = np.unique(block[keep])
+    if len(blocks) < 2:
+        return BlockCV(math.inf, math.inf, math.inf)
+    base = design(data, spec.without(name), model, weights=weights)
+    th, _ = solve_gram(base.gram(rows), base.bounds)
+    r = base.y - base.X @ th
+    own = np.array([lab != MASS and lab[0] == name for lab in d.labels], dtype=bool)
+    Z = np.column_stack([d.X[:, own], r])
+    G = [Z[keep & (block == b)].T @ Z[keep & (block == b)] for b in blocks]
+    total = sum(G)
+    held = sum(sse_with(g, solve_gram(total - g)[0]) for g in G)
+    return BlockCV(held=float(held), seen=float(solve_gram(total)[1]),
+                   nothing=float(total[-1, -1]))
+
+
 def cv_design(data: Dataset, spec: Spec, model: AxisModel | None,
               weights: SpeedWeights | None = None) -> tuple[float, float]:
     """Return the held-out and in-sample SSE of ``spec`` (bounded least squares)."""
@@ -492,9 +544,15 @@ def cv_candidate(data: Dataset, spec: Spec, name: str, model: AxisModel | None, 
         if sse0 <= 0 or 1.0 - sse1 / sse0 < screen:
             return cv_design(data, s1, model)[0], eta_all
         eta_all = refine_structure(data, s1, name, model)
+    length = t.repeats_every(eta_all)
+    if length is not None and not block_cv(data, spec.with_(name, eta_all), name, model,
+                                           length).repeats:
+        # it does not repeat along the travel as it claims: no held-out gain
+        return cv_design(data, spec, model)[0], eta_all
     trials = fold_trials(data, spec, name, eta_all)
     return cv_choices(data, [spec.with_(name, e) for e in trials], model), eta_all
 
 
-__all__ = ['Search', 'searched', 'cv_candidate', 'cv_choices', 'cv_design', 'fold_trials',
+__all__ = ['BlockCV', 'Search', 'block_cv', 'searched', 'cv_candidate', 'cv_choices', 'cv_design',
+           'fold_trials',
            'refine_structure', 'search', 'vp_sse']

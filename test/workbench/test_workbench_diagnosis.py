@@ -37,10 +37,10 @@ DURATION = 20.0
 #: the issue's bars
 FALSE_ALARM_SHARE = 0.10
 COMPLETE_SHARE = 0.95
-#: what the workbench reaches on the complete cases at seed 21 (36 of 40 quiet and near
-#: the floor at fbd3d3b): under the issue's bar of 95 %, which is not met (issue 23
-#: note); held here so that it does not fall further
-COMPLETE_MEASURED = 0.90
+#: what the workbench reaches on the complete cases at seed 21: 38 of 40 without a
+#: feature of 10 % (the issue's bar; 36 before ripples had to repeat along the travel
+#: and Stribeck's vs reached a third of the high speeds)
+COMPLETE_MEASURED = COMPLETE_SHARE
 #: ... and within 1.5× the reported floor: 29 of 40 (the issue's 95 % is not met).  In
 #: most of the misses the TRUE model is itself over 1.5× the floor (up to 11× on a
 #: 2 kHz force-input sine): the floor does not hold all that the processing leaves
@@ -124,8 +124,13 @@ def test_complete_models_invent_no_feature_and_reach_their_floor(complete):
          if o not in reach]
 
 
-def test_effects_the_library_lacks_are_reported_where_they_act():
-    outs = _run('out', OUT_OF_LIBRARY_CASES, SEEDS)
+@pytest.fixture(scope='module')
+def out_of_library():
+    return _run('out', OUT_OF_LIBRARY_CASES, SEEDS)
+
+
+def test_effects_the_library_lacks_are_reported_where_they_act(out_of_library):
+    outs = out_of_library
     hits = [o for o in outs if any(feature_matches(f, p) for p in o['planted']
                                    for f in o['features'])]
     missed = [(o['label'], [f['text'][:70] for f in o['features']]) for o in outs
@@ -175,20 +180,54 @@ def test_the_noise_floor_is_measured_not_assumed(complete):
         assert o['floor'] <= 4.0 * o['nrmse'] + 1e-4, (o['label'], o['floor'], o['nrmse'])
 
 
-def test_a_ripple_seen_over_two_and_a_half_periods_is_a_ripple():
+def test_a_ripple_seen_over_two_and_a_half_periods_is_a_ripple(complete):
     """A sine of ±14 mm over an 11.4 mm ripple: 2.5 periods in the travel.
 
     While a ripple needed three periods seen, this run's fit took a spring, pre-sliding,
-    a dead time and a mass 2.6× the truth (held-out NRMSE 28× the true model's).  Two
-    periods now let the fundamental in (its harmonics still need three, so the 1.56 N
-    second harmonic is left in the residual and said as a feature).
+    a dead time and a mass 2.6× the truth (held-out NRMSE 28× the true model's); while
+    its harmonics needed three, the 1.56 N second harmonic was left in the residual
+    (NRMSE 8.5× the truth's).  A ripple that predicts the stretches of the travel it
+    was not fitted on now pays with its harmonics at two periods.
     """
-    case = next(c for c in COMPLETE_CASES
-                if c.label == 'coulomb+viscous+ripple [lin for 2000Hz sine m2]')
-    o = _job(('complete', COMPLETE_CASES.index(case), 21))
+    o = next(o for o in complete
+             if o['label'] == 'coulomb+viscous+ripple [lin for 2000Hz sine m2]')
     eff = o['fitted']['effects']
+    truth = o['truth']['effects']['ripple']
     assert set(eff) == {'coulomb', 'viscous', 'ripple'}, eff
-    assert eff['ripple']['period'] == pytest.approx(
-        o['truth']['effects']['ripple']['period'], rel=0.01)
+    assert eff['ripple']['period'] == pytest.approx(truth['period'], rel=0.01)
+    assert len(eff['ripple']['harmonics']) >= 2, eff['ripple']
+    a2 = math.hypot(*eff['ripple']['harmonics'][1])
+    assert a2 == pytest.approx(math.hypot(*truth['harmonics'][1]), rel=0.2)
     assert o['fitted']['mass'] == pytest.approx(o['truth']['mass'], rel=0.05)
-    assert o['features'], 'the second harmonic left in the residual is not said'
+    assert o['nrmse'] <= 1.1 * o['truth_nrmse'], (o['nrmse'], o['truth_nrmse'])
+    assert not [f for f in o['features'] if f['share'] >= FALSE_ALARM_SHARE], o['features']
+
+
+def test_a_bump_is_not_drawn_as_ripple_harmonics(out_of_library):
+    """A 12 N bump at one place on a ±90 mm sweep: no ripple, the bump said where it is.
+
+    With harmonics allowed at two periods seen, six harmonics of an 84 mm period drew
+    the bump (held-out on the travel's quarters: 8.5 % of the 79 % they explained where
+    they were fitted) and its copy a period away was said as the feature instead.
+    """
+    o = next(o for o in out_of_library
+             if o['label'] == 'coulomb+viscous & bump [lin vol 1000Hz sweep m2]')
+    assert 'ripple' not in o['fitted']['effects'], o['fitted']['effects']
+    assert any(feature_matches(f, p) for p in o['planted'] for f in o['features']), \
+        [f['text'][:80] for f in o['features']]
+
+
+def test_a_wide_stribeck_curve_is_searched(complete):
+    """A rotary run whose Stribeck ``vs`` is 13 % of its 95th-percentile speed.
+
+    The search stopped ``vs`` at a tenth of that speed: fc, fv and vs then traded off
+    into a model 2.2× the true one's NRMSE, with a 77 % speed feature.  A third (the
+    rise decays to e⁻³ within the speeds seen) holds it.
+    """
+    o = next(o for o in complete
+             if o['label'] == 'coulomb+viscous+stribeck [rot cur 1000Hz interleaved m2]')
+    assert set(o['fitted']['effects']) == {'coulomb', 'viscous', 'stribeck'}
+    got, truth = o['fitted']['effects']['stribeck'], o['truth']['effects']['stribeck']
+    assert got['vs'] == pytest.approx(truth['vs'], rel=0.2)
+    assert o['nrmse'] <= 1.1 * o['truth_nrmse'], (o['nrmse'], o['truth_nrmse'])
+    assert not [f for f in o['features'] if f['share'] >= FALSE_ALARM_SHARE], o['features']

@@ -334,6 +334,17 @@ class Term:
         """Return ``eta`` at another structural order."""
         return dict(eta)
 
+    def repeats_every(self, eta: Mapping) -> float | None:
+        """Return the length of the position blocks it must predict unseen, or None.
+
+        A structure periodic in position claims that what it fits on some stretches of
+        the travel repeats on the others: it pays only when, fitted without each block
+        of this length [m or rad], it predicts that block
+        (:func:`~motor_comp.workbench.varpro.block_cv`), so a shape at one place (a bump
+        the library lacks) is not taken for it.  None: no such claim.
+        """
+        return None
+
     def grow(self, eta: Mapping) -> dict | None:
         """Return ``eta`` with one more structural element to try (None: no growth)."""
         return None

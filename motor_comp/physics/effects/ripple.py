@@ -184,9 +184,9 @@ def spatial_spectrum(x: np.ndarray, r: np.ndarray, *, n_bins: int | None = None)
 MAX_FIT_HARMONICS = 6
 
 
-#: least periods over the travel for a ripple (a sinusoid), and for its harmonics
+#: least periods over the travel for a ripple: two tell a periodic force from a shape
+#: along the travel (validated on stretches not fitted, ``RippleTerm.repeats_every``)
 PERIODS_SEEN = 2.0
-PERIODS_SEEN_HARMONICS = 3.0
 
 
 class RippleTerm(Term):
@@ -194,10 +194,11 @@ class RippleTerm(Term):
 
     The period starts at the largest peak of the residual's spatial spectrum between
     eight position bins (or four samples per period at the high speeds) and half the
-    travel (two periods seen; three for harmonics), and is refined by variable projection
-    within ``±1.5·p²/span`` (the spectrum's resolution); the harmonic count (the
-    term's order, 1–6, at least four samples per period at the median speed) by an
-    information criterion.  Each column is position-periodic: the workbench averages
+    travel (two periods seen), and is refined by variable projection within
+    ``±1.5·p²/span`` (the spectrum's resolution); the harmonic count (the term's order,
+    1–6, at least four samples per period at the median speed) by an information
+    criterion.  It pays only if it predicts stretches of the travel it was not fitted
+    on (:meth:`repeats_every`).  Each column is position-periodic: the workbench averages
     it over the acceleration stencil's kernel.
     """
 
@@ -213,7 +214,7 @@ class RippleTerm(Term):
         """Return ``period`` [m] (no grid: the start comes from the spectrum).
 
         Up to half the travel: two periods seen tell a sinusoid from a shape along the
-        travel; its harmonics need three (:meth:`orders`).
+        travel.
         """
         hi = max(s.travel / PERIODS_SEEN, 2.0 * self._min_period(s))
         return (Param('period', self._min_period(s), hi, resolved=True),)
@@ -235,10 +236,6 @@ class RippleTerm(Term):
     def orders(self, s: Summary, eta: Mapping) -> tuple[int, int]:
         """Return the harmonic counts allowed at the period (four samples per period)."""
         min_p = max(4.0 * s.dt * float(s.speeds[50]), 1e-12)
-        if float(eta['period']) > s.travel / PERIODS_SEEN_HARMONICS:
-            # fewer than three periods seen: harmonics of a long period would draw any
-            # shape along the travel (a bump the library lacks) twice over
-            return 1, 1
         return 1, max(1, min(MAX_FIT_HARMONICS, int(math.floor(float(eta['period']) / min_p))))
 
     def order_of(self, eta: Mapping) -> int:
@@ -248,6 +245,17 @@ class RippleTerm(Term):
     def with_order(self, eta: Mapping, order: int) -> dict:
         """Return ``eta`` with ``order`` harmonics."""
         return dict(eta, harmonics=int(order))
+
+    def repeats_every(self, eta: Mapping) -> float:
+        """Return a quarter period: each quarter must be predicted from the others.
+
+        Over two or three periods, harmonics of a long period would draw any shape along
+        the travel (a bump the library lacks) and its copy a period away; a periodic
+        force fitted without one quarter still sees that phase on the other periods, a
+        bump's copy is where nothing is.  Quarters, not whole periods: a bump cut in two
+        by a block's edge would otherwise half predict itself.
+        """
+        return 0.25 * float(eta['period'])
 
     def initial(self, s: Summary, ctx: Context, profile: Any) -> list[dict]:
         """Return the spectrum's largest peak and its visible harmonics as the start."""
@@ -264,8 +272,7 @@ class RippleTerm(Term):
         a1 = spec.amplitude_at(1.0 / p0)
         floor = float(np.median(amp))
         nh = 1
-        for h in range(2, MAX_FIT_HARMONICS + 1 if p0 <= spec.span / PERIODS_SEEN_HARMONICS
-                       else 2):
+        for h in range(2, MAX_FIT_HARMONICS + 1):
             if h / p0 > 1.0 / min_p:
                 break
             ah = spec.amplitude_at(h / p0)
