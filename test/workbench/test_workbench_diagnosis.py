@@ -207,8 +207,8 @@ def test_a_bump_is_not_drawn_as_ripple_harmonics(out_of_library):
     """A 12 N bump at one place on a ±90 mm sweep: no ripple, the bump said where it is.
 
     With harmonics allowed at two periods seen, six harmonics of an 84 mm period drew
-    the bump (held-out on the travel's quarters: 8.5 % of the 79 % they explained where
-    they were fitted) and its copy a period away was said as the feature instead.
+    the bump, and its copy a period away was said as the feature instead; left out one
+    period at a time they predict 23 % of what they explain where fitted.
     """
     o = next(o for o in out_of_library
              if o['label'] == 'coulomb+viscous & bump [lin vol 1000Hz sweep m2]')

@@ -247,15 +247,15 @@ class RippleTerm(Term):
         return dict(eta, harmonics=int(order))
 
     def repeats_every(self, eta: Mapping) -> float:
-        """Return a quarter period: each quarter must be predicted from the others.
+        """Return the period: each period of the travel must be predicted from the others.
 
         Over two or three periods, harmonics of a long period would draw any shape along
         the travel (a bump the library lacks) and its copy a period away; a periodic
-        force fitted without one quarter still sees that phase on the other periods, a
-        bump's copy is where nothing is.  Quarters, not whole periods: a bump cut in two
-        by a block's edge would otherwise half predict itself.
+        force fitted without one period still sees every phase on the others, a bump's
+        copy is where nothing is (the generator's bumps: 23 % and 52 % of what the
+        harmonics explained where fitted; its ripples 95–100 %).
         """
-        return 0.25 * float(eta['period'])
+        return float(eta['period'])
 
     def initial(self, s: Summary, ctx: Context, profile: Any) -> list[dict]:
         """Return the spectrum's largest peak and its visible harmonics as the start."""
