@@ -23,7 +23,10 @@ term and reads only its declarations:
 
 Choices made from data are made inside each validation fold when a held-out score is
 wanted (:func:`cv_candidate`): each fold takes, on its own training rows, the best of
-the grid and a neighbourhood of the all-data choice.
+the grid and a neighbourhood of the all-data choice.  A term that claims to repeat
+along the travel (``Term.repeats_every``: the ripple) is first held to that claim on
+stretches of the travel it was not fitted on (:func:`block_cv`); one that does not
+repeat has no held-out gain.
 """
 from __future__ import annotations
 
@@ -472,30 +475,28 @@ class BlockCV:
 
 
 def block_cv(data: Dataset, spec: Spec, name: str, model: AxisModel | None,
-             length: float, *, rows: np.ndarray | None = None,
-             weights: SpeedWeights | None = None) -> BlockCV:
+             length: float) -> BlockCV:
     """Return how well term ``name`` predicts blocks of ``length`` along the travel.
 
-    The spec is fitted on all rows (``rows``: a subset) and the other terms' share is
-    taken off the target; the term's own columns, fitted to that on all blocks but
-    one, predict that one, over :data:`BLOCK_SHIFTS` partitions of the travel shifted
-    by a fraction of a block (:class:`BlockCV`: the mean held-out SSE, the SSE fitted
-    on all, and the SSE of predicting nothing).  A force periodic in position fitted
-    on some periods predicts the others; a shape at one place (a bump) does not.  The
-    other terms are not refitted per block: a spring fitted without the end of the
-    travel would mispredict it for reasons of its own.  All ``inf`` under two blocks.
+    The spec is fitted on all rows and the other terms' share is taken off the target;
+    the term's own columns, fitted to that on all blocks but one, predict that one,
+    over :data:`BLOCK_SHIFTS` partitions of the travel shifted by a fraction of a block
+    (:class:`BlockCV`: the mean held-out SSE, the SSE fitted on all, and the SSE of
+    predicting nothing).  A force periodic in position fitted on some periods predicts
+    the others; a shape at one place (a bump) does not.  The other terms are not
+    refitted per block: a spring fitted without the end of the travel would mispredict
+    it for reasons of its own.  All ``inf`` under two blocks.
     """
-    d = design(data, spec, model, weights=weights)
+    d = design(data, spec, model)
     x = d.view.gather(lambda p, mo: mo.x)
-    keep = np.ones(len(x), dtype=bool) if rows is None else rows
-    th, _ = solve_gram(d.gram(rows), d.bounds)
+    th, _ = solve_gram(d.gram(), d.bounds)
     own = np.array([lab != MASS and lab[0] == name for lab in d.labels], dtype=bool)
     r = d.y - d.X[:, ~own] @ th[~own]
-    Z = np.column_stack([d.X[:, own], r])[keep]
+    Z = np.column_stack([d.X[:, own], r])
     total = Z.T @ Z
     held = []
     for shift in np.arange(BLOCK_SHIFTS) / BLOCK_SHIFTS:
-        block = np.floor((x[keep] - x[keep].min()) / max(length, 1e-300) + shift)
+        block = np.floor((x - x.min()) / max(length, 1e-300) + shift)
         blocks = np.unique(block)
         if len(blocks) < 2:
             return BlockCV(math.inf, math.inf, math.inf)
@@ -561,6 +562,5 @@ def cv_candidate(data: Dataset, spec: Spec, name: str, model: AxisModel | None, 
     return cv_choices(data, [spec.with_(name, e) for e in trials], model), eta_all
 
 
-__all__ = ['BlockCV', 'Search', 'block_cv', 'searched', 'cv_candidate', 'cv_choices', 'cv_design',
-           'fold_trials',
-           'refine_structure', 'search', 'vp_sse']
+__all__ = ['BlockCV', 'Search', 'block_cv', 'searched', 'cv_candidate', 'cv_choices',
+           'cv_design', 'fold_trials', 'refine_structure', 'search', 'vp_sse']
