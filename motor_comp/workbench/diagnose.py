@@ -35,7 +35,7 @@ from motor_comp.workbench.residual import Residual, residual
 from motor_comp.workbench.result import CandidateResult
 from motor_comp.workbench.scan import scan
 from motor_comp.workbench.wording import LINEAR_UNITS, MASS, REFIT, common_scale, \
-    experiment_notes, gain_note, identifiability_notes
+    experiment_notes, gain_note, identifiability_notes, unresolved
 
 
 @dataclasses.dataclass(frozen=True)
@@ -152,11 +152,11 @@ def _param_text(c: CandidateResult) -> str:
     out = []
     for k, v in c.scalars.items():
         s = c.uncertainty.get(k)
-        if s is not None and np.isfinite(s) and 0 < s < abs(v):
-            out.append(f'{k}={v:.4g}±{s:.2g}')
-        else:   # an SE beyond the value is no error bar (see wording.fmt_param)
-            out.append(f'{k}={v:.4g}' + ('(unresolved)' if s is not None
-                                         and not np.isnan(s) and s >= abs(v) > 0 else ''))
+        if unresolved(v, s):
+            out.append(f'{k}={v:.4g}(unresolved)')
+        else:
+            out.append(f'{k}={v:.4g}' + (f'±{s:.2g}' if s is not None and np.isfinite(s)
+                                         and s > 0 else ''))
     return ' '.join(out)
 
 

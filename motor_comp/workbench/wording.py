@@ -86,18 +86,25 @@ def params_text(est: Any, name: str, units: Units) -> str:
     return ', '.join(fmt_param(name, k, v, se.get(k), units) for k, v in vals.items())
 
 
+def unresolved(value: float, se: float | None) -> bool:
+    """Return whether a standard error is at least its value (no error bar).
+
+    The run does not resolve the parameter, e.g. a GMS attraction rate on a run whose
+    turns never leave pre-sliding slowly (± 2e+15 1/s).
+    """
+    return se is not None and not np.isnan(se) and se >= abs(value) > 0
+
+
 def fmt_param(effect: str, key: str, value: float, se: float | None, u: Units) -> str:
     """Return ``'fc 10.0 ± 0.1 N'`` in the axis units."""
     unit, k = unit_of(effect, key, u)
     txt = f'{key} {value * k:.4g}'
-    # an SE beyond the value itself (e.g. a GMS attraction rate on a run whose turns
-    # never leave pre-sliding slowly: ± 2e+15 1/s) is no error bar: say what it means
-    unresolved = se is not None and not np.isnan(se) and se >= abs(value) > 0
-    if se is not None and np.isfinite(se) and se > 0 and not unresolved:
+    bad = unresolved(value, se)
+    if se is not None and np.isfinite(se) and se > 0 and not bad:
         txt += f' ± {se * k:.2g}'
     if unit:
         txt += f' {unit}'
-    if unresolved:
+    if bad:
         txt += ' (not resolved by this run)'
     if effect == 'ripple' and key == 'period' and u.rotary and value > 0:
         txt += f' ({2 * math.pi / value:.3g} cycles/rev)'
@@ -280,4 +287,4 @@ __all__ = ['LINEAR_UNITS', 'MASS', 'ParameterChange', 'REFIT', 'ROTARY_UNITS', '
            'TITLES', 'axis_units', 'common_scale', 'directions', 'experiment_notes',
            'fmt_param', 'force_scaled', 'gain_note', 'identifiability_notes',
            'model_scalars', 'more_words', 'params_text', 'scale_forces',
-           'significant_changes', 'unit_of']
+           'significant_changes', 'unit_of', 'unresolved']
