@@ -29,6 +29,8 @@ setup(
         'pyyaml>=6.0',
         'mcap>=1.1',
         'mcap-ros2-support>=0.5',
+        # robots' rosbag2 bags in sqlite3 storage (and their split/metadata layout)
+        'rosbags>=0.9',
         'matplotlib>=3.7',
         'threadpoolctl>=3.1',
         'setuptools',

@@ -168,7 +168,7 @@ def _max_rel(a, b) -> float:
 
 def main() -> None:
     """Generate, measure, print the table, delete the files."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument('--lengths', type=int, nargs='+', default=[60, 3600, 36000],
                     help='run lengths [s] at 1 kHz (the first is the reference)')
     ap.add_argument('--no-array', type=int, nargs='*', default=[],

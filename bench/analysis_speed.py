@@ -106,7 +106,7 @@ def time_rosbags(path: Path, limit: int | None) -> tuple[int, float]:
 
 def main() -> None:
     """Generate the file if needed, measure, print the table."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument('--seconds', type=int, default=1000, help='run length at 1 kHz [s]')
     ap.add_argument('--rosbags-limit', type=int, default=1_000_000,
                     help='decode this many messages with rosbags (its rate is per message; '

@@ -53,7 +53,7 @@ def run_one(plant: str, work: Path) -> dict:
 
 def main() -> int:
     """Run both plants; print the table; 1 if a target fails."""
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument('--plants', nargs='+', default=['pmlm', 'ballscrew'],
                    choices=sorted(BARE))
     p.add_argument('--keep', type=Path, default=None, metavar='DIR',

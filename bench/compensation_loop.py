@@ -114,7 +114,7 @@ def friction_effects(duration: float = 6.0) -> bool:
 
 def main() -> int:
     """Run the loop on both plants for a few seeds; print the table; 1 if a target fails."""
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument('--seeds', type=int, default=3, help='noise seeds per plant (default 3)')
     p.add_argument('--duration', type=float, default=20.0, help='recorded time [s]')
     p.add_argument('--friction-only', action='store_true',

@@ -66,7 +66,7 @@ CASES = {
 
 def main() -> int:
     """Print the table; 0 always (a measurement, not a gate)."""
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument('--seeds', type=int, default=6, help='design seeds per axis (default 6)')
     p.add_argument('--duration', type=float, default=60.0, help='excitation length [s]')
     args = p.parse_args()

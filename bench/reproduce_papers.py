@@ -312,7 +312,7 @@ def ordering_rows(seconds: float) -> list[str]:
 
 def main() -> int:
     """Print the tables (and with ``--png`` the convergence figure)."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument('--pmlm-seconds', type=float, default=30.0)
     ap.add_argument('--ballscrew-seconds', type=float, default=20.0)
     ap.add_argument('--png', action='store_true', help='write bench/out/adaptive_estimates.png')

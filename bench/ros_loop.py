@@ -182,7 +182,7 @@ def realtime_latency(duration: float, workdir: Path, priority: int) -> dict[str,
 
 def main() -> int:
     """Run the three measurements and print the table."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument('--role', choices=('ping', 'pong'))
     ap.add_argument('--steps', type=int, default=5000)
     ap.add_argument('--loop', choices=('executor', 'lean'), default='executor')

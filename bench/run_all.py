@@ -22,6 +22,7 @@ SCRIPTS = (
     'sim_scaling.py',
     'analysis_speed.py',
     'analysis_scaling.py',
+    'bag_read.py',
     'workbench.py',
     'workbench_speed.py',
     'workbench_independent.py',
@@ -38,7 +39,7 @@ SCRIPTS = (
 
 def main() -> int:
     """Run the benchmarks; return non-zero if any failed."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     parser.add_argument('names', nargs='*', help='run only these scripts (e.g. sim_speed)')
     parser.add_argument('--timeout', type=float, default=1800.0, help='per script [s]')
     args = parser.parse_args()

@@ -23,7 +23,7 @@ import numpy as np
 
 def main() -> int:
     """Measure and print the Markdown table."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument('--lengths', default='10,30,100,300,1000,3600',
                     help='simulated lengths [s], comma separated')
     args = ap.parse_args()

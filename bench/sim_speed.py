@@ -170,7 +170,7 @@ def cli_end_to_end(seconds: float) -> dict[str, tuple[float, float]]:
 
 def main() -> int:
     """Measure and print the Markdown table."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument('--seconds', type=float, default=120.0, help='simulated span, jit [s]')
     ap.add_argument('--cli-seconds', type=float, default=600.0, help='span of the CLI run')
     ap.add_argument('--ref-seconds', type=float, default=2.0,

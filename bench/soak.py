@@ -132,7 +132,7 @@ def report(name: str, res: dict, args: argparse.Namespace) -> float:
 
 def main() -> int:
     """Run the soak (and the control) and print the tables."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument('--duration', type=float, default=600.0, help='sim seconds (1 kHz)')
     ap.add_argument('--interval', type=float, default=5.0,
                     help='recorder memory sample interval [s] (wall)')

@@ -46,7 +46,7 @@ def _cpu(pids) -> float:
 
 def main() -> int:
     """Measure and print the Markdown table."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument('--points', type=int, default=2000, help='grid points (multiple of 20)')
     ap.add_argument('--duration', type=float, default=5.0, help='simulated time per point [s]')
     ap.add_argument('--single', type=int, default=200,

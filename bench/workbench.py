@@ -160,7 +160,7 @@ def speed(lengths: list[float]) -> None:
 
 def main() -> int:
     """Run the benchmark."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument('--seeds', type=int, default=1, help='draws per effect (default 1)')
     ap.add_argument('--duration', type=float, default=15.0, help='recovery run length [s]')
     ap.add_argument('--long', action='store_true', help='include a 1 h run in the scaling')

@@ -44,8 +44,10 @@ from motor_comp.analysis.metrics import Move, RunMetrics, Segment
 from motor_comp.errors import InputFileError, ParameterError, check_positive
 from motor_comp.logs import cdr
 from motor_comp.logs import mcap_io as M
+from motor_comp.logs.bags import Bag
 from motor_comp.logs.progress import Progress, warn
 from motor_comp.logs.run import Run
+from motor_comp.logs.topics import RunTopics
 
 #: samples per block of the streaming passes (fixed: memory does not depend on length)
 BLOCK = 1 << 16
@@ -124,13 +126,13 @@ class _SpillReader(M._Reader):
         super().__init__(*args, **kw)
         self.spill = spill
 
-    def _add_channel(self, ch: Any) -> None:
-        new = ch.topic not in self.topics
-        super()._add_channel(ch)
-        tp = self.topics.get(ch.topic)
+    def add_channel(self, cid: int, topic: str, *args: Any) -> None:
+        new = topic not in self.topics
+        super().add_channel(cid, topic, *args)
+        tp = self.topics.get(topic)
         if new and tp is not None and not isinstance(tp, _SpillTopic):
-            self.topics[ch.topic] = _SpillTopic(tp.topic, tp.kind, drop=tp.drop,
-                                                spill=self.spill)
+            self.topics[topic] = _SpillTopic(tp.topic, tp.kind, drop=tp.drop, joint=tp.joint,
+                                             strict=tp.strict, spill=self.spill)
 
 
 # ============================================================================ signals
@@ -304,45 +306,48 @@ class RunStream:
 
 
 def open_stream(path: str | os.PathLike, *, progress: bool = False, namespace: str = 'axis',
-                joint: str = 'axis', signals: Collection[str] | None = None,
+                signals: Collection[str] | None = None,
                 require: Collection[str] | Mapping[str, str] = (),
-                spill_dir: str | None = None) -> RunStream | Run:
-    """Open an MCAP run for streaming; same checks, warnings and errors as ``read_run``.
+                spill_dir: str | None = None, topics: RunTopics | None = None
+                ) -> RunStream | Run:
+    """Open a run for streaming; same checks, warnings and errors as ``read_run``.
+
+    Any bag ``read_run`` reads (an MCAP file, a rosbag2 directory of either storage) and
+    the same ``topics`` selection.
 
     Returns a :class:`RunStream` (close it, or use it as a context manager, to delete
     its spill files), or a :class:`Run` read by ``read_run`` when the file's stamps are
     out of order or duplicated (they need a global sort).
     """
-    path, size, names, wanted = M._prepare(path, namespace, signals, require)
+    bag, size, names, wanted, topics = M._prepare(path, namespace, signals, require, topics)
     spill = tempfile.mkdtemp(prefix='motor_comp_stream_', dir=spill_dir)
     try:
-        stream = _open(path, size, names, wanted, spill, progress=progress, joint=joint,
+        stream = _open(bag, size, names, wanted, spill, progress=progress, topics=topics,
                        require=require)
     except BaseException:
         shutil.rmtree(spill, ignore_errors=True)
         raise
     if stream is None:
         shutil.rmtree(spill, ignore_errors=True)
-        return M.read_run(path, progress=progress, namespace=namespace, joint=joint,
-                          signals=signals, require=require)
+        return M.read_run(path, progress=progress, signals=signals, require=require,
+                          topics=topics)
     return stream
 
 
-def _open(path: Path, size: int, names: Mapping[str, str],
-          wanted: dict[str, tuple[str, frozenset[str]]], spill: str, *, progress: bool,
-          joint: str, require: Collection[str] | Mapping[str, str]) -> RunStream | None:
-    prog = Progress(path.name, size, enabled=progress)
-    reader = _SpillReader(path, wanted, joint, prog, spill=spill)
+def _open(bag: Bag, size: int, names: dict[str, str | None], wanted: dict[str, M.Want],
+          spill: str, *, progress: bool, topics: RunTopics,
+          require: Collection[str] | Mapping[str, str]) -> RunStream | None:
+    path = bag.path
+    prog = Progress(bag.path.name, size, enabled=progress)
+    reader = _SpillReader(bag.files[0], wanted, prog, spill=spill)
     try:
-        complete, damage = reader.read()
-    except OSError as exc:
-        raise InputFileError(f'{path}: cannot read ({exc.strerror or exc})') from None
+        damage = M._read(bag, reader)
     finally:
         prog.finish()
         for tp in reader.topics.values():
             for col in tp.columns.values():
                 col.close()   # type: ignore[attr-defined]
-    js = M.joint_states_of(path, reader, names, damage)
+    js = M.joint_states_of(path, reader, names, damage, topics)
     assert isinstance(js, _SpillTopic)
     unusable: dict[str, str] = {}
     sigs: dict[str, _Signal] = {}
@@ -359,8 +364,19 @@ def _open(path: Path, size: int, names: Mapping[str, str],
             if key not in ref.drop and ref.column(key) is not None:
                 sigs[field] = _Signal(field, ref.topic, key, ref.column('stamp'),
                                       ref.column(key), ref.column('present'), bit)
-    volt = reader.topics.get(names['voltage'])
-    if volt is not None and volt.count():
+    volt = reader.topics.get(names['voltage'] or '')
+    if topics.effort_input:
+        if 'effort' in sigs:
+            e = sigs['effort']
+            sigs['voltage'] = _Signal('voltage', e.topic, 'effort', e.stamp, e.value,
+                                      e.present, e.bit)
+    elif volt is not None and volt.count() and volt.kind == 'joint':
+        assert isinstance(volt, _SpillTopic)
+        if volt.column('effort') is not None:
+            sigs['voltage'] = _Signal('voltage', volt.topic, 'effort', volt.column('stamp'),
+                                      volt.column('effort'), volt.column('present'),
+                                      cdr.HAS_EFFORT)
+    elif volt is not None and volt.count():
         assert isinstance(volt, _SpillTopic)
         offset = -int(np.median(np.concatenate(js.log_minus_stamp)))
         sigs['voltage'] = _Signal('voltage', volt.topic, 'value', volt.column('stamp'),
@@ -389,14 +405,14 @@ def _open(path: Path, size: int, names: Mapping[str, str],
     for name, rec in reader.metadata.items():
         for k, v in rec.items():
             meta[k if name == M.METADATA_NAME else f'{name}/{k}'] = v
-    stream = RunStream(name=path.stem, metadata=meta, samples=samples,
+    stream = RunStream(name=bag.name, metadata=meta, samples=samples,
                        signals=tuple(present), _position=pos, _others=present, _skip=first,
                        _spill=spill)
     for field in require:
         if not stream.has(field):
             hint = require.get(field, '') if isinstance(require, Mapping) else ''
             raise InputFileError(M._absent(path, reader, names, field, unusable, damage,
-                                           hint=hint))
+                                           hint=hint, topics=topics))
     for field, why in unusable.items():
         warn(f'{path.name}: {why}; {field} treated as absent')
     if damage is not None:
@@ -559,7 +575,8 @@ def stream_metrics(path: str | os.PathLike, *, glitch_window: float = 0.2,
                    settle_tolerance: float = 0.02, settle_band: float | None = None,
                    min_dwell: float = 0.01, chatter_cutoff: float = 100.0,
                    zero_tol: float = 1e-6, progress: bool = False, namespace: str = 'axis',
-                   spill_dir: str | None = None) -> RunMetrics:
+                   spill_dir: str | None = None, topics: RunTopics | None = None
+                   ) -> RunMetrics:
     """Metrics of an MCAP run, streamed (see the module docstring).
 
     Same parameters, result and errors as
@@ -571,7 +588,7 @@ def stream_metrics(path: str | os.PathLike, *, glitch_window: float = 0.2,
     src = open_stream(path, progress=progress, namespace=namespace,
                       signals=('reference', 'reference_velocity', 'voltage'),
                       require={'reference': 'the tracking error is reference − position'},
-                      spill_dir=spill_dir)
+                      spill_dir=spill_dir, topics=topics)
     kw = dict(glitch_window=glitch_window, settle_tolerance=settle_tolerance,
               settle_band=settle_band, min_dwell=min_dwell, chatter_cutoff=chatter_cutoff,
               zero_tol=zero_tol)

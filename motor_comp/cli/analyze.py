@@ -20,7 +20,8 @@ import json
 import sys
 from typing import Any
 
-from motor_comp.cli.common import add_json, add_report, jsonable, positive_float
+from motor_comp.cli.common import (add_bag_options, add_json, add_report, jsonable,
+                                   positive_float, run_topics)
 from motor_comp.errors import ParameterError
 
 
@@ -35,7 +36,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         'analyze', help='tracking error and quadrant glitches of recorded runs',
         description=__doc__.splitlines()[0], epilog=_POLICY)
-    p.add_argument('runs', nargs='+', metavar='RUN.mcap', help='MCAP runs (first = baseline)')
+    p.add_argument('runs', nargs='+', metavar='RUN',
+                   help='runs: MCAP files or rosbag2 directories (first = baseline)')
     p.add_argument('--glitch-window', type=positive_float, default=0.2, metavar='S',
                    help='window W after each reference reversal [s] (default 0.2)')
     p.add_argument('--settle-band', type=positive_float, default=None, metavar='M',
@@ -44,6 +46,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--chatter-cutoff', type=positive_float, default=100.0, metavar='HZ',
                    help='voltage content above this frequency counts as chattering [Hz]')
     p.add_argument('--namespace', default='axis', help='topic namespace (default axis)')
+    add_bag_options(p)
     add_json(p)
     add_report(p, help='write figures and index.html here')
     p.add_argument('--progress', action='store_true',
@@ -63,16 +66,17 @@ def run(args: argparse.Namespace) -> int:
     from motor_comp.logs.diagnostics import read_diagnostics
 
     progress = bool(args.progress or sys.stderr.isatty())
+    topics = run_topics(args)
     runs, metrics = [], []
     for path in args.runs:
         try:
             if not args.report:     # streamed: memory independent of the run length
                 metrics.append(stream_metrics(
-                    path, progress=progress, namespace=args.namespace,
+                    path, progress=progress, topics=topics,
                     glitch_window=args.glitch_window, settle_band=args.settle_band,
                     chatter_cutoff=args.chatter_cutoff))
                 continue
-            r = read_run(path, progress=progress, namespace=args.namespace,
+            r = read_run(path, progress=progress, topics=topics,
                          signals=('reference', 'reference_velocity', 'voltage'),
                          require={'reference': 'the tracking error is reference − position'})
             runs.append(r)

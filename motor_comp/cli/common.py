@@ -65,6 +65,47 @@ def add_limits(p: argparse.ArgumentParser, description: str) -> None:
                      help='tracking-error limit |x_ref − x| [m]')
 
 
+def add_bag_options(p: argparse.ArgumentParser, *, reference: bool = True,
+                    several_joints: bool = False, signals: bool = True) -> None:
+    """Add ``--topic --joint --input --reference``: where a run is in a robot's bag.
+
+    DESIGN.md §6 "Runs from robots"; :func:`run_topics` turns them into the readers'
+    :class:`~motor_comp.logs.topics.RunTopics`.  ``signals=False`` leaves out
+    ``--input``/``--reference`` (a command that defines them itself, e.g. ``import``).
+    """
+    g = p.add_argument_group(
+        'robot bags', 'an MCAP file or a rosbag2 directory (MCAP or sqlite3 storage); '
+        'by default the topics of motor-comp run (/axis/joint_states, /axis/voltage, '
+        '/axis/reference), then /joint_states')
+    g.add_argument('--topic', metavar='T',
+                   help='the JointState topic of the measurement (default '
+                        '/axis/joint_states, then /joint_states)')
+    g.add_argument('--joint', metavar='NAME',
+                   help='the joint of a multi-joint JointState, matched by name in every '
+                        'message' + ('; "all": every moving joint, one model each '
+                                     '(with -o DIR/)' if several_joints else ''))
+    if not signals:
+        return
+    g.add_argument('--input', metavar='effort|TOPIC',
+                   help='the drive input: "effort" (the joint\'s effort, in the units of '
+                        'the model\'s input: N or N·m for force, A for current) or a topic '
+                        '(Float64, or a JointState\'s effort: TOPIC[:JOINT]); default '
+                        '/axis/voltage')
+    if reference:
+        g.add_argument('--reference', metavar='TOPIC[:JOINT]',
+                       help='the reference for tracking metrics: a JointState or a '
+                            'control_msgs JointTrajectoryControllerState (default '
+                            '/axis/reference)')
+
+
+def run_topics(args: argparse.Namespace, *, joint: str | None = None) -> Any:
+    """Return the :class:`~motor_comp.logs.topics.RunTopics` of the bag options in ``args``."""
+    from motor_comp.logs.topics import RunTopics
+    return RunTopics.of(namespace=getattr(args, 'namespace', 'axis'), topic=args.topic,
+                        joint=joint if joint is not None else args.joint, input=args.input,
+                        reference=getattr(args, 'reference', None))
+
+
 def check_output_file(path: str | os.PathLike, option: str) -> Path:
     """Check, before any long computation, that ``path`` can be created as a file.
 

@@ -12,18 +12,22 @@ import json
 import sys
 from typing import Any
 
-from motor_comp.cli.common import add_json, add_report, jsonable, positive_float
+from motor_comp.cli.common import (add_bag_options, add_json, add_report, jsonable,
+                                   positive_float, run_topics)
 
 
-def add_common(p: argparse.ArgumentParser, *, several: bool = False) -> None:
+def add_common(p: argparse.ArgumentParser, *, several: bool = False,
+               several_joints: bool = False) -> None:
     """Arguments shared by compare, diagnose and fit (``several``: one or more runs)."""
     if several:
-        p.add_argument('run', metavar='RUN.mcap', nargs='+',
-                       help='measured run(s) (MCAP; import CSV/MAT first); several runs '
-                            'are one experiment: one model is fitted on all of them')
+        p.add_argument('run', metavar='RUN', nargs='+',
+                       help='measured run(s): MCAP files or rosbag2 directories (MCAP or '
+                            'sqlite3 storage; import CSV/MAT first); several runs are one '
+                            'experiment: one model is fitted on all of them')
     else:
-        p.add_argument('run', metavar='RUN.mcap',
-                       help='measured run (MCAP; import CSV/MAT first)')
+        p.add_argument('run', metavar='RUN',
+                       help='measured run: an MCAP file or a rosbag2 directory (import '
+                            'CSV/MAT first)')
     p.add_argument('--model', required=True, metavar='MODEL.yaml', help='model file')
     add_json(p, help='print one JSON object to stdout')
     p.add_argument('--window', type=positive_float, default=0.02, metavar='S',
@@ -35,6 +39,14 @@ def add_common(p: argparse.ArgumentParser, *, several: bool = False) -> None:
                    help='treat the axis as rotary even if the model file has no '
                         '"axis: rotary" (angles in rad, torques in N·m, periods also in '
                         'cycles/rev)')
+    add_bag_options(p, several_joints=several_joints)
+
+
+def session(args: argparse.Namespace, *, joint: str | None = None) -> Any:
+    """Open the runs and the model of ``args`` (the bag options say where the run is)."""
+    from motor_comp.workbench import open_session
+    return open_session(args.run, args.model, window_s=args.window, hold=args.input_hold,
+                        rotary=args.rotary, topics=run_topics(args, joint=joint))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -59,10 +71,9 @@ def emit(args: argparse.Namespace, data: dict[str, Any], text: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``compare``."""
-    from motor_comp.workbench import compare, open_session
+    from motor_comp.workbench import compare
     from motor_comp.workbench import report as rep
-    s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold,
-                     rotary=args.rotary)
+    s = session(args)
     rotary = s.model.units.rotary
     cmp = compare(s.run, s.kin, s.model, horizon=args.horizon)
     white = rep.whiteness(s.kin, cmp.residual, closed_loop=rep.is_closed_loop(s.run))

@@ -15,7 +15,7 @@ import argparse
 import sys
 
 from motor_comp.cli.common import add_report, jsonable, positive_float
-from motor_comp.cli.compare import add_common, emit
+from motor_comp.cli.compare import add_common, emit, session
 
 
 def fraction(text: str) -> float:
@@ -48,11 +48,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``diagnose``."""
-    from motor_comp.workbench import diagnose, open_session
+    from motor_comp.workbench import diagnose
     from motor_comp.workbench import report as rep
     from motor_comp.workbench.report_scan import floor_figure, scan_figure
-    s = open_session(args.run, args.model, window_s=args.window, hold=args.input_hold,
-                     rotary=args.rotary)
+    s = session(args)
     d = diagnose(list(s.kins), s.model, folds=args.folds, min_gain=args.min_gain)
     text = d.summary()
     data = d.as_dict()

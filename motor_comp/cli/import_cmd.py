@@ -1,27 +1,38 @@
-"""``motor-comp import``: a CSV/MAT test-rig table to a canonical MCAP run.
+"""``motor-comp import``: a CSV/MAT table, or a robot bag's joint, to a canonical MCAP run.
 
 Columns are selected by header name or 0-based index (CSV) or ``VAR``/``VAR:INDEX``
 (MAT); scales convert to SI (e.g. ``--position-scale`` metres per encoder count).
+A bag (an MCAP file or a rosbag2 directory, MCAP or sqlite3 storage) is read with
+``--topic``/``--joint`` and ``--input effort | TOPIC``/``--reference TOPIC[:JOINT]``
+instead of columns: the joint becomes the run's ``/axis`` topics.
 """
 from __future__ import annotations
 
 import argparse
 import json
+from typing import Any
 
-from motor_comp.cli.common import add_json, check_output_file, finite_float, nonzero_float
-from motor_comp.errors import InputFileError
+from motor_comp.cli.common import (add_bag_options, add_json, check_output_file,
+                                   finite_float, nonzero_float, run_topics)
+from motor_comp.errors import InputFileError, ParameterError
+
+#: what is read as a bag (anything else is a table for ``import_table``)
+BAG_SUFFIXES = ('.mcap', '.db3')
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``import`` subcommand."""
-    p = subparsers.add_parser('import', help='convert a CSV/MAT table to an MCAP run',
-                              description=__doc__.splitlines()[0])
-    p.add_argument('data', metavar='DATA.{csv,mat}', help='input table')
-    p.add_argument('--time', required=True, metavar='COL', help='time column')
-    p.add_argument('--input', required=True, metavar='COL',
-                   help='input column (voltage; or current/force for such drives)')
-    p.add_argument('--position', required=True, metavar='COL', help='measured position column')
-    p.add_argument('--reference', metavar='COL', help='reference position column')
+    p = subparsers.add_parser('import', help='convert a CSV/MAT table or a bag\'s joint to '
+                              'an MCAP run', description=__doc__.splitlines()[0])
+    p.add_argument('data', metavar='DATA', help='input table (.csv, .mat) or bag')
+    p.add_argument('--time', metavar='COL', help='time column (tables: required)')
+    p.add_argument('--input', metavar='COL',
+                   help='tables: input column (voltage; or current/force for such drives), '
+                        'required; bags: effort | TOPIC (default /axis/voltage)')
+    p.add_argument('--position', metavar='COL',
+                   help='measured position column (tables: required)')
+    p.add_argument('--reference', metavar='COL',
+                   help='tables: reference position column; bags: TOPIC[:JOINT]')
     p.add_argument('--velocity', metavar='COL', help='measured velocity column')
     p.add_argument('--reference-velocity', metavar='COL', help='reference velocity column')
     p.add_argument('--effort', metavar='COL', help='actuator force column')
@@ -40,6 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--mat-orient', choices=('auto', 'rows', 'columns'), default='auto',
                    help='MAT 2-D variables: signals are rows or columns (default: shorter axis)')
     p.add_argument('-o', '--output', required=True, metavar='RUN.mcap', help='output MCAP')
+    add_bag_options(p, signals=False)
     add_json(p)
     p.set_defaults(func=run)
 
@@ -54,6 +66,14 @@ def run(args: argparse.Namespace) -> int:
     out = check_output_file(args.output, '-o')
     if out.resolve() == Path(args.data).resolve():
         raise InputFileError(f'{out}: output would overwrite the input')
+    if not (Path(args.data).is_dir() or Path(args.data).suffix.lower() in BAG_SUFFIXES):
+        missing = [f'--{k}' for k in ('time', 'input', 'position') if getattr(args, k) is None]
+        if missing:
+            raise ParameterError(f'{args.data}: a table needs {", ".join(missing)} COL')
+        if args.topic is not None or args.joint is not None:
+            raise ParameterError('--topic/--joint select a joint in a bag, not in a table')
+    else:
+        return _bag(args, out)
     r = import_table(args.data, time=args.time, input=args.input, position=args.position,
                      reference=args.reference, velocity=args.velocity,
                      reference_velocity=args.reference_velocity, effort=args.effort,
@@ -65,11 +85,38 @@ def run(args: argparse.Namespace) -> int:
         write_run(out, r)
     except OSError as exc:
         raise InputFileError(f'{out}: cannot write ({exc.strerror or exc})') from None
+    _written(args, out, r)
+    return 0
+
+
+def _bag(args: argparse.Namespace, out: Any) -> int:
+    """``import BAG``: one joint of a robot's bag to a canonical run."""
+    from pathlib import Path
+
+    from motor_comp.logs import read_run, write_run
+    table_only = [f'--{k.replace("_", "-")}' for k in (
+        'time', 'position', 'velocity', 'reference_velocity', 'effort')
+        if getattr(args, k) is not None]
+    if table_only:
+        raise ParameterError(f'{", ".join(table_only)}: column options of tables; a bag '
+                             'is read with --topic, --joint, --input, --reference')
+    if out.resolve() == Path(args.data).resolve():
+        raise InputFileError(f'{out}: output would overwrite the input')
+    r = read_run(args.data, topics=run_topics(args))
+    try:
+        write_run(out, r)
+    except OSError as exc:
+        raise InputFileError(f'{out}: cannot write ({exc.strerror or exc})') from None
+    _written(args, out, r)
+    return 0
+
+
+def _written(args: argparse.Namespace, out: Any, r: Any) -> None:
+    """Say what was written (one JSON object with ``--json``)."""
     signals = [s for s in r.SIGNALS if getattr(r, s) is not None]
     if args.json:
         print(json.dumps({'output': str(out), 'samples': len(r), 't_start': float(r.t[0]),
                           't_end': float(r.t[-1]), 'signals': signals}))
     else:
-        print(f'{args.data} -> {out}: {len(r)} samples, {r.t[0]:.6g}–{r.t[-1]:.6g} s '
-              f'({", ".join(signals)})')
-    return 0
+        print(f'{args.data} -> {out}: {len(r)} samples over {r.duration:.6g} s from '
+              f't = {r.t[0]:.9g} s ({", ".join(signals)})')

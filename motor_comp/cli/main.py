@@ -40,7 +40,15 @@ DESCRIPTION = ('Precision servo axes: simulate with friction, GMS pre-sliding an
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with the project's one-line error format (exit status 2)."""
+    """argparse with the project's one-line error format (exit status 2).
+
+    Options are never abbreviated (``allow_abbrev=False``): ``--input`` must never be
+    taken for ``--input-hold`` (DESIGN.md §6).
+    """
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        kwargs['allow_abbrev'] = False
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
 
     def error(self, message: str) -> None:  # noqa: D102 - argparse API
         self.exit(2, f'motor-comp: error: {message}\n')

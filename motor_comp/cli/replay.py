@@ -6,7 +6,13 @@ name, as the recorded CDR bytes (no decode/encode), paced by the recorded log ti
 divided by ``--rate``.  Sim time goes out on ``/clock``: the recorded ``/clock`` if the
 file has one, else one Clock per distinct log time.  So a controller node, a
 monitoring node or a live plotter (``use_sim_time:=true``) consumes a past run as if it
-were live.  Ctrl-C stops cleanly.
+were live.  A rosbag2 directory (MCAP or sqlite3 storage, split or not) is replayed the
+same way.
+
+With ``--topic``/``--joint``/``--input``/``--reference`` one joint of a robot's bag is
+published instead as the DESIGN.md §5 topics (``/axis/joint_states``,
+``/axis/voltage``, ``/axis/reference``), so the project's nodes (e.g. ``monitor_node``)
+consume a robot's joint as they consume an axis of ours.  Ctrl-C stops cleanly.
 """
 from __future__ import annotations
 
@@ -19,7 +25,7 @@ import time
 from pathlib import Path
 from typing import Any, Iterator
 
-from motor_comp.cli.common import add_json, nonnegative_float
+from motor_comp.cli.common import add_bag_options, add_json, nonnegative_float, run_topics
 from motor_comp.errors import InputFileError, ParameterError
 from motor_comp.logs.progress import warn
 
@@ -42,8 +48,44 @@ def _messages(path: Path, damage: list[tuple[int, str]] | None = None
     """(topic, type, log_time_ns, cdr) in log-time order; one-line errors.
 
     A file without a readable summary (truncated, or the recorder was killed) is read
-    linearly in file order up to its damage, which is described in ``damage``.
+    linearly in file order up to its damage, which is described in ``damage``.  A
+    rosbag2 directory: its files in order (sqlite3 storage through rosbags).
     """
+    from motor_comp.logs.bags import locate
+    bag = locate(path)
+    if bag.storage == 'sqlite3':
+        from rosbags.rosbag2 import Reader
+        with Reader(bag.path) as b:
+            for conn, stamp, raw in b.messages():
+                yield conn.topic, conn.msgtype, stamp, raw
+        return
+    for f in bag.files:
+        yield from _mcap_messages(f, damage)
+
+
+def _run_messages(path: Path, topics: Any) -> Iterator[tuple[str, str, int, bytes]]:
+    """One joint of a bag as the §5 topics: (topic, type, stamp_ns, cdr) in time order."""
+    import numpy as np
+
+    from motor_comp.logs import cdr, read_run, schemas
+    run = read_run(path, topics=topics)
+    names = schemas.topics('axis')
+    t = np.round(run.t * 1e9).astype(np.int64)
+    streams = [(names['joint_states'], schemas.JOINT_STATE,
+                cdr.encode_joint_states(t, run.position, run.velocity, run.effort))]
+    if run.voltage is not None:
+        streams.append((names['voltage'], schemas.FLOAT64, cdr.encode_float64(run.voltage)))
+    if run.reference is not None:
+        streams.append((names['reference'], schemas.JOINT_STATE,
+                        cdr.encode_joint_states(t, run.reference, run.reference_velocity)))
+    for i in range(t.size):
+        for topic, type_name, rows in streams:
+            yield topic, type_name, int(t[i]), rows[i].tobytes()
+
+
+def _mcap_messages(path: Path, damage: list[tuple[int, str]] | None = None
+                   ) -> Iterator[tuple[str, str, int, bytes]]:
+    """One MCAP file's messages (see :func:`_messages`)."""
     from mcap.exceptions import McapError
     from mcap.reader import NonSeekingReader, make_reader
 
@@ -109,19 +151,20 @@ class ReplayResult:
 
 
 def replay(path: Path, *, rate: float = 1.0, wait_for_subscribers: int = 0,
-           startup_delay: float = 1.0, timeout: float = 30.0) -> ReplayResult:
+           startup_delay: float = 1.0, timeout: float = 30.0,
+           topics: Any = None) -> ReplayResult:
     """Publish ``path``'s topics at ``rate`` × recorded speed; counts and lateness.
 
     ``rate`` 0 publishes as fast as possible.  Before the first message, waits until
     ``wait_for_subscribers`` readers have matched any replayed topic (at most
     ``timeout`` s) and then ``startup_delay`` s, so DDS discovery completes.
+    ``topics`` (a :class:`~motor_comp.logs.topics.RunTopics`): publish that joint of
+    the bag as the §5 topics instead of every channel as recorded.
     """
     path = Path(path)
-    if path.is_dir():
-        raise InputFileError(f'{path}: is a directory, expected an MCAP file')
-    if not path.is_file():
-        raise InputFileError(f'{path}: no such file')
-    if path.stat().st_size == 0:
+    from motor_comp.logs.bags import locate
+    bag = locate(path)
+    if bag.storage == 'mcap' and any(f.stat().st_size == 0 for f in bag.files):
         raise InputFileError(f'{path}: empty file')
     if not (rate >= 0.0 and rate < float('inf')):
         raise ParameterError(f'--rate must be >= 0, got {rate:g}')
@@ -131,7 +174,11 @@ def replay(path: Path, *, rate: float = 1.0, wait_for_subscribers: int = 0,
     # pre-scan: the channels to publish (and a corrupt file fails before any publish)
     types: dict[str, str] = {}
     damage: list[tuple[int, str]] = []
-    for topic, type_name, _, _ in _messages(path, damage):
+
+    def messages(damage: list[tuple[int, str]] | None = None
+                 ) -> Iterator[tuple[str, str, int, bytes]]:
+        return _messages(path, damage) if topics is None else _run_messages(path, topics)
+    for topic, type_name, _, _ in messages(damage):
         types.setdefault(topic, type_name)
     if damage and not types:
         raise InputFileError(f'{path}: corrupt or truncated ({damage[0][1]}); '
@@ -173,7 +220,7 @@ def replay(path: Path, *, rate: float = 1.0, wait_for_subscribers: int = 0,
         t0_wall = time.monotonic()
         last_clock = None
         late, max_late = 0, 0.0
-        for topic, _, log_ns, data in _messages(path):
+        for topic, _, log_ns, data in messages():
             pub = pubs.get(topic)
             if pub is None:
                 continue
@@ -204,7 +251,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``replay`` subcommand."""
     p = subparsers.add_parser('replay', help='publish a recorded run with its timing',
                               description=__doc__.splitlines()[0])
-    p.add_argument('run', type=Path, help='RUN.mcap')
+    p.add_argument('run', type=Path, help='an MCAP file or a rosbag2 directory')
     p.add_argument('--rate', type=nonnegative_float, default=1.0,
                    help='speed factor (default 1 = recorded speed; 0 = as fast as possible)')
     p.add_argument('--wait-for-subscribers', type=int, default=0, metavar='N',
@@ -212,6 +259,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--startup-delay', type=nonnegative_float, default=1.0,
                    help='seconds for DDS discovery before the first message (default 1)')
     add_json(p, help='print the counts as one JSON object')
+    add_bag_options(p)
     p.set_defaults(func=run)
 
 
@@ -221,8 +269,11 @@ def run(args: argparse.Namespace) -> int:
     require_ros('motor-comp replay')
     if args.startup_delay < 0 or args.wait_for_subscribers < 0:
         raise ParameterError('--startup-delay and --wait-for-subscribers must be >= 0')
+    one_joint = any(getattr(args, k) is not None
+                    for k in ('topic', 'joint', 'input', 'reference'))
     res = replay(args.run, rate=args.rate, wait_for_subscribers=args.wait_for_subscribers,
-                 startup_delay=args.startup_delay)
+                 startup_delay=args.startup_delay,
+                 topics=run_topics(args) if one_joint else None)
     if args.json:
         print(json.dumps({'run': str(args.run), 'published': res.published,
                           'late': res.late, 'max_late_s': res.max_late_s}))

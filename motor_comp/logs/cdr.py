@@ -61,8 +61,13 @@ class JointStateLayout:
         return m
 
 
-def joint_state_layout(data: bytes, joint: bytes) -> JointStateLayout | int:
-    """Layout of one JointState payload, or a status code (FOREIGN, SHORT, NO_JOINT)."""
+def joint_state_layout(data: bytes, joint: bytes, strict: bool = False
+                       ) -> JointStateLayout | int:
+    """Layout of one JointState payload, or a status code (FOREIGN, SHORT, NO_JOINT).
+
+    A message with one joint (or none named) is taken whatever its name unless
+    ``strict`` (the user named the joint).
+    """
     if len(data) < 4 or data[:2] != CDR_LE:
         return FOREIGN if len(data) >= 4 else SHORT
     body = memoryview(data)[4:]
@@ -90,7 +95,7 @@ def joint_state_layout(data: bytes, joint: bytes) -> JointStateLayout | int:
             p += 4 + ln
         if joint in names:
             j = names.index(joint)
-        elif len(names) <= 1:
+        elif len(names) <= 1 and not strict:
             j = 0
         else:
             return NO_JOINT

@@ -121,7 +121,7 @@ def _double_array(buf, base, end, p, index, bits, fview):
 
 
 @njit(cache=True)
-def decode_joint_states(buf, data_start, data_length, joint):
+def decode_joint_states(buf, data_start, data_length, joint, strict=False):
     """Decode ``sensor_msgs/JointState`` payloads (little-endian CDR).
 
     Parameters
@@ -132,7 +132,9 @@ def decode_joint_states(buf, data_start, data_length, joint):
         Offset and length of each payload in ``buf``.
     joint : ndarray of uint8
         Name of the joint to extract (UTF-8, no terminator).  A message with one joint
-        (or no names) is taken whatever its name.
+        (or no names) is taken whatever its name, unless ``strict``.
+    strict : bool
+        The joint must be named in every message (the user chose it).
 
     Returns
     -------
@@ -200,7 +202,7 @@ def decode_joint_states(buf, data_start, data_length, joint):
             status[i] = SHORT
             continue
         if index < 0:
-            if nnames <= 1:
+            if nnames <= 1 and not strict:
                 index = 0
             else:
                 status[i] = NO_JOINT

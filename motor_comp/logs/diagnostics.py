@@ -50,19 +50,21 @@ class DiagnosticRecord:
 def read_diagnostics(path: str | os.PathLike, *, topic: str = TOPIC) -> list[DiagnosticRecord]:
     """Return the ``DiagnosticStatus`` records of ``topic`` in an MCAP file, in log order.
 
-    A file without the topic gives an empty list; a rosbag2 directory is searched for
-    its MCAP files.  The file's index is used to read only the chunks that hold the
-    topic; a file whose index is damaged or missing (a recording cut short) is read
-    from its start up to the damage.  Damage is not reported again here: the reader of
-    the loop's topics (:func:`motor_comp.logs.read_run`) already says so.
+    A file without the topic gives an empty list; a rosbag2 directory's MCAP files are
+    read in order (a sqlite3 bag gives an empty list).  The file's index is used to read
+    only the chunks that hold the topic; a file whose index is damaged or missing (a
+    recording cut short) is read from its start up to the damage.  Damage is not
+    reported again here: the reader of the loop's topics
+    (:func:`motor_comp.logs.read_run`) already says so.
 
     Raises
     ------
     InputFileError
         The file cannot be opened.
     """
-    p = Path(path)
-    files = sorted(p.glob('*.mcap')) if p.is_dir() else [p]
+    from motor_comp.logs.bags import locate
+    bag = locate(Path(path))
+    files = bag.files if bag.storage == 'mcap' else ()   # sqlite3: not read here
     out: list[DiagnosticRecord] = []
     for f in files:
         try:

@@ -52,9 +52,11 @@ from typing import Any, Callable, Collection, Iterator, Mapping
 import numpy as np
 
 from motor_comp.errors import InputFileError, ParameterError
-from motor_comp.logs import cdr, schemas
+from motor_comp.logs import bags, cdr, schemas
+from motor_comp.logs.bags import Bag
 from motor_comp.logs.progress import Progress, warn
 from motor_comp.logs.run import Run
+from motor_comp.logs.topics import RunTopics
 
 MAGIC = b'\x89MCAP0\r\n'
 _MAX_CHUNK = 1 << 30
@@ -399,9 +401,11 @@ class _Topic:
     """Decoded samples of one topic, accumulated chunk by chunk."""
 
     topic: str
-    kind: str                     # 'joint' or 'scalar'
+    kind: str                     # 'joint', 'scalar' or 'ctrl' (a controller state)
     columns: dict[str, _Column] = dataclasses.field(default_factory=dict)
     drop: frozenset[str] = frozenset()      # decoded fields not to keep
+    joint: str = 'axis'           # joint of a multi-joint message
+    strict: bool = False          # the joint must be named in every message
     corrupt: int = 0
     messages: int = 0
     log_minus_stamp: list[np.ndarray] = dataclasses.field(default_factory=list)
@@ -421,6 +425,21 @@ class _Topic:
 
     def count(self) -> int:
         return self.messages
+
+
+@dataclasses.dataclass(frozen=True)
+class Want:
+    """What to decode from one topic.
+
+    ``kind`` is ``joint`` (JointState), ``scalar`` (a ``data`` field), ``input`` (a
+    JointState's effort or a scalar, by the topic's type) or ``reference`` (a JointState
+    or a controller state, by the type); ``drop``: decoded fields not to keep.
+    """
+
+    kind: str
+    drop: frozenset[str] = frozenset()
+    joint: str = 'axis'
+    strict: bool = False
 
 
 @dataclasses.dataclass
@@ -467,13 +486,11 @@ def _decompress(compression: str, data: bytes, size: int) -> bytes:
 class _Reader:
     """One pass over an MCAP file, decoding the wanted topics chunk by chunk."""
 
-    def __init__(self, path: Path, wanted: Mapping[str, tuple[str, frozenset[str]]],
-                 joint: str, progress: Progress) -> None:
+    def __init__(self, path: Path, wanted: Mapping[str, Want], progress: Progress) -> None:
         self.path = path
-        self.wanted = wanted           # topic -> (kind, fields not to keep)
-        self.joint = np.frombuffer(joint.encode(), np.uint8).copy()
-        self.joint_name = joint
+        self.wanted = wanted           # topic -> what to decode
         self.progress = progress
+        self.done_bytes = 0            # bytes of the earlier files of a split bag
         self.schemas: dict[int, Any] = {}
         self.channels: dict[int, _Channel] = {}
         self.metadata: dict[str, dict[str, str]] = {}
@@ -483,6 +500,15 @@ class _Reader:
         self._decoders: dict[int, Callable[[bytes], Any]] = {}
         self._open: tuple[int, np.ndarray] | None = None
         self._index: dict[int, np.ndarray] = {}
+
+    def next_file(self, path: Path) -> None:
+        """Go on with the next file of a split bag: its own schemas and channel ids."""
+        self.done_bytes += self.path.stat().st_size
+        self.path = path
+        self.schemas.clear()
+        self.channels.clear()
+        self._decoders.clear()
+        self._open, self._index = None, {}
 
     # ---------------------------------------------------------------- records
     def _records(self, f: io.BufferedReader, size: int) -> Iterator[tuple[int, int, bytes]]:
@@ -507,7 +533,7 @@ class _Reader:
                 body = b''
             yield pos, op, body
             pos += 9 + length
-            self.progress.update(pos)
+            self.progress.update(self.done_bytes + pos)
             if op in (_OP_DATA_END, _OP_FOOTER):
                 return
 
@@ -568,18 +594,22 @@ class _Reader:
     def _add_channel(self, ch: Any) -> None:
         schema = self.schemas.get(ch.schema_id)
         name = schemas.normalise_type(schema.name) if schema is not None else ''
-        self.all_topics[ch.topic] = name
-        if ch.topic not in self.wanted:
+        self.add_channel(ch.id, ch.topic, name, ch.message_encoding, schema)
+
+    def add_channel(self, cid: int, topic: str, type_name: str, encoding: str,
+                    schema: Any) -> None:
+        """Register a channel (MCAP channel record, or a rosbag2 sqlite3 connection)."""
+        self.all_topics[topic] = type_name
+        if topic not in self.wanted:
             return
-        kind, drop = self.wanted[ch.topic]
-        if kind == 'joint' and name != schemas.JOINT_STATE:
-            raise InputFileError(f'{self.path}: {ch.topic} has type {name or "(no schema)"}, '
-                                 f'expected {schemas.JOINT_STATE}')
-        if ch.message_encoding != 'cdr':
-            raise InputFileError(f'{self.path}: {ch.topic} is {ch.message_encoding!r}-encoded; '
+        want = self.wanted[topic]
+        kind = _kind_of(self.path, topic, want.kind, type_name)
+        if encoding != 'cdr':
+            raise InputFileError(f'{self.path}: {topic} is {encoding!r}-encoded; '
                                  'only ROS 2 CDR is supported')
-        self.channels[ch.id] = _Channel(ch.topic, name, ch.message_encoding, schema)
-        self.topics.setdefault(ch.topic, _Topic(ch.topic, kind, drop=drop))
+        self.channels[cid] = _Channel(topic, type_name, encoding, schema)
+        self.topics.setdefault(topic, _Topic(topic, kind, drop=want.drop, joint=want.joint,
+                                             strict=want.strict))
 
     def _chunk_bytes(self, body: bytes) -> np.ndarray:
         """Decompress and CRC-check a chunk record's records."""
@@ -667,19 +697,31 @@ class _Reader:
             if cid not in per:
                 continue
             o, lens = per[cid]
-            ds, dl = o + 31, lens - 22
-            log = _gather_u64(buf, o + 15).astype(np.int64)
-            topic = self.topics[ch.topic]
-            if not (np.all(dl == dl[0]) and self._fixed(ch, topic, buf, ds, int(dl[0]), log)):
-                self._decode(ch, topic, buf, log, ds, dl)
+            self.decode_batch(cid, buf, _gather_u64(buf, o + 15).astype(np.int64), o + 31,
+                              lens - 22)
         return True
+
+    def decode_batch(self, cid: int, buf: np.ndarray, log: np.ndarray, ds: np.ndarray,
+                     dl: np.ndarray) -> None:
+        """Decode one channel's payloads at offsets ``ds`` (lengths ``dl``) of ``buf``.
+
+        One payload layout (the usual case) goes through the numpy byte-matrix path,
+        varying layouts through the compiled scanner.
+        """
+        ch = self.channels[cid]
+        topic = self.topics[ch.topic]
+        if not (np.all(dl == dl[0]) and self._fixed(ch, topic, buf, ds, int(dl[0]), log)):
+            self._decode(ch, topic, buf, log, ds, dl)
 
     def _fixed(self, ch: _Channel, topic: _Topic, buf: np.ndarray, ds: np.ndarray,
                length: int, log: np.ndarray) -> bool:
         """Decode payloads of one length as a byte matrix; False if the layout varies."""
         rows = cdr.payload_matrix(buf, ds, length)
+        if topic.kind == 'ctrl':
+            return False
         if topic.kind == 'joint':
-            layout = cdr.joint_state_layout(rows[0].tobytes(), self.joint_name.encode())
+            layout = cdr.joint_state_layout(rows[0].tobytes(), topic.joint.encode(),
+                                            topic.strict)
             if not isinstance(layout, cdr.JointStateLayout):
                 return False
             res = cdr.decode_joint_states_fixed(rows, layout)
@@ -745,17 +787,25 @@ class _Reader:
                 ds: np.ndarray, dl: np.ndarray) -> None:
         """Decode message by message (compiled), general decoder for foreign encodings."""
         from motor_comp.logs import cdr_jit
-        if topic.kind == 'joint':
-            stamp, pos, vel, eff, present, status = cdr_jit.decode_joint_states(
-                buf, ds, dl, self.joint)
+        if topic.kind in ('joint', 'ctrl'):
+            if topic.kind == 'joint':
+                stamp, pos, vel, eff, present, status = cdr_jit.decode_joint_states(
+                    buf, ds, dl, np.frombuffer(topic.joint.encode(), np.uint8).copy(),
+                    topic.strict)
+            else:
+                m = ds.shape[0]
+                stamp, status = np.zeros(m, np.int64), np.full(m, cdr.FOREIGN, np.uint8)
+                pos, vel, eff = np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan)
+                present = np.zeros(m, np.uint8)
             if np.any(status == cdr.NO_JOINT):
                 i = int(np.flatnonzero(status == cdr.NO_JOINT)[0])
                 msg = self._general(ch)(buf[ds[i]:ds[i] + dl[i]].tobytes())
-                raise InputFileError(f'{self.path}: {ch.topic} has no joint named '
-                                     f'{self.joint_name!r} (joints: {list(msg.name)})')
+                raise InputFileError(_no_joint(self.path, ch.topic, topic.joint,
+                                               list(msg.name)))
+            general = self._joint_general if topic.kind == 'joint' else self._ctrl_general
             for i in np.flatnonzero(status == cdr.FOREIGN):
-                stamp[i], pos[i], vel[i], eff[i], present[i], status[i] = self._joint_general(
-                    ch, buf[ds[i]:ds[i] + dl[i]].tobytes())
+                stamp[i], pos[i], vel[i], eff[i], present[i], status[i] = general(
+                    ch, topic, buf[ds[i]:ds[i] + dl[i]].tobytes())
             ok = status == cdr.OK
             topic.corrupt += int(ok.size - np.count_nonzero(ok))
             self._store_joint(topic, stamp[ok], log[ok], pos[ok], vel[ok], eff[ok], present[ok])
@@ -785,22 +835,26 @@ class _Reader:
             self._decoders[key] = dec
         return self._decoders[key]
 
-    def _joint_general(self, ch: _Channel, data: bytes) -> tuple:
+    def _joint_general(self, ch: _Channel, topic: _Topic, data: bytes) -> tuple:
         """Decode with the general (mcap_ros2) decoder what the fast path does not handle."""
         try:
             m = self._general(ch)(data)
-            names = list(m.name)
-            j = names.index(self.joint_name) if self.joint_name in names else 0
-            stamp = int(m.header.stamp.sec) * 1_000_000_000 + int(m.header.stamp.nanosec)
-            out, present = [], 0
-            for bit, arr in ((cdr.HAS_POSITION, m.position), (cdr.HAS_VELOCITY, m.velocity),
-                             (cdr.HAS_EFFORT, m.effort)):
-                if len(arr) > j:
-                    out.append(float(arr[j]))
-                    present |= bit
-                else:
-                    out.append(np.nan)
-            return (stamp, *out, present, cdr.OK)
+            return _joint_values(self.path, ch.topic, topic, _stamp(m), list(m.name),
+                                 (m.position, m.velocity, m.effort))
+        except InputFileError:
+            raise
+        except Exception:  # noqa: BLE001 - undecodable payload: counted as corrupt
+            return (0, np.nan, np.nan, np.nan, 0, cdr.SHORT)
+
+    def _ctrl_general(self, ch: _Channel, topic: _Topic, data: bytes) -> tuple:
+        """A controller state's reference (``reference``, or ``desired`` before Iron)."""
+        try:
+            m = self._general(ch)(data)
+            point = getattr(m, 'reference', None)
+            if point is None or not (len(point.positions) or len(point.velocities)):
+                point = getattr(m, 'desired', point)
+            return _joint_values(self.path, ch.topic, topic, _stamp(m), list(m.joint_names),
+                                 (point.positions, point.velocities, ()))
         except InputFileError:
             raise
         except Exception:  # noqa: BLE001 - undecodable payload: counted as corrupt
@@ -813,6 +867,59 @@ class _Reader:
             raise
         except Exception:  # noqa: BLE001 - undecodable payload: counted as corrupt
             return np.nan, cdr.SHORT
+
+
+#: types a reference topic may have: a JointState, or a ros2_control controller's state
+CONTROLLER_STATES = ('control_msgs/msg/JointTrajectoryControllerState',
+                     'control_msgs/msg/JointControllerState')
+
+
+def _kind_of(path: Path, topic: str, kind: str, type_name: str) -> str:
+    """Resolve what to decode from a wanted topic by its type; one-line error if unusable."""
+    if kind == 'input':
+        return 'joint' if type_name == schemas.JOINT_STATE else 'scalar'
+    if kind == 'reference':
+        if type_name == schemas.JOINT_STATE:
+            return 'joint'
+        if type_name == CONTROLLER_STATES[0]:
+            return 'ctrl'
+        raise InputFileError(f'{path}: {topic} has type {type_name or "(no schema)"}; a '
+                             f'reference is a {schemas.JOINT_STATE} or a '
+                             f'{CONTROLLER_STATES[0]}')
+    if kind == 'joint' and type_name != schemas.JOINT_STATE:
+        raise InputFileError(f'{path}: {topic} has type {type_name or "(no schema)"}, '
+                             f'expected {schemas.JOINT_STATE}')
+    return kind
+
+
+def _no_joint(path: Path, topic: str, joint: str, names: list[str]) -> str:
+    """The one-line error for a joint a message does not have, listing those it has."""
+    has = ', '.join(names) if names else 'no named joints'
+    return (f'{path}: joint {joint!r} not in {topic} (has: {has}); pick one with '
+            '--joint NAME')
+
+
+def _stamp(msg: Any) -> int:
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+
+
+def _joint_values(path: Path, topic_name: str, topic: _Topic, stamp: int, names: list[str],
+                  arrays: tuple) -> tuple:
+    """(stamp, position, velocity, effort, present bits, status) of the topic's joint."""
+    if topic.joint in names:
+        j = names.index(topic.joint)
+    elif len(names) <= 1 and not topic.strict:
+        j = 0
+    else:
+        raise InputFileError(_no_joint(path, topic_name, topic.joint, names))
+    out, present = [], 0
+    for bit, arr in zip((cdr.HAS_POSITION, cdr.HAS_VELOCITY, cdr.HAS_EFFORT), arrays):
+        if len(arr) > j:
+            out.append(float(arr[j]))
+            present |= bit
+        else:
+            out.append(np.nan)
+    return (stamp, *out, present, cdr.OK)
 
 
 def _clean(path: Path, topic: str, field: str, t: np.ndarray, v: np.ndarray,
@@ -851,78 +958,118 @@ def _clean(path: Path, topic: str, field: str, t: np.ndarray, v: np.ndarray,
 
 
 def _prepare(path: str | os.PathLike, namespace: str, signals: Collection[str] | None,
-             require: Collection[str]
-             ) -> tuple[Path, int, Mapping[str, str], dict[str, tuple[str, frozenset[str]]]]:
-    """Check the file and the wanted signals; return (file, size, topic names, wanted)."""
-    path = Path(path)
-    if not path.exists():
-        raise InputFileError(f'{path}: no such file')
-    if path.is_dir():                  # a rosbag2 directory holding one MCAP file
-        files = sorted(path.glob('*.mcap'))
-        if len(files) != 1:
-            raise InputFileError(f'{path}: a directory with {len(files)} .mcap files; '
-                                 'pass one MCAP file')
-        path = files[0]
-    if not path.is_file():
-        raise InputFileError(f'{path}: not a file')
-    size = path.stat().st_size
-    if size == 0:
-        raise InputFileError(f'{path}: empty file')
-    if size < 8:
-        raise InputFileError(f'{path}: not an MCAP file (only {size} bytes)')
-    names = schemas.topics(namespace)
+             require: Collection[str], topics: RunTopics | None = None
+             ) -> tuple[Bag, int, dict[str, str | None], dict[str, Want], RunTopics]:
+    """Check the files and the wanted signals.
+
+    Returns the bag, its size, the topic of each signal (``joint_states`` is the first
+    candidate until :func:`joint_states_of` has seen the messages; ``voltage`` None
+    when the input is the joint's effort), what to decode per topic, and the selection.
+    """
+    topics = topics or RunTopics.of(namespace=namespace)
+    bag = bags.locate(path)
+    if bag.storage == 'mcap':
+        for f in bag.files:
+            size = f.stat().st_size
+            if size == 0:
+                raise InputFileError(f'{f}: empty file')
+            if size < 8:
+                raise InputFileError(f'{f}: not an MCAP file (only {size} bytes)')
+    names: dict[str, str | None] = {'joint_states': topics.joint_states[0],
+                                    'reference': topics.reference, 'voltage': topics.input}
     keep = set(Run.SIGNALS) if signals is None else set(signals) | {'position'}
     keep |= set(require)
     unknown = keep - set(Run.SIGNALS)
     if unknown:
         raise ParameterError(f'signals: unknown {sorted(unknown)}; choose from {Run.SIGNALS}')
-    wanted = {names['joint_states']: ('joint', frozenset(
-        f for f in ('velocity', 'effort') if f not in keep))}
+    if topics.effort_input and 'voltage' in keep:
+        keep.add('effort')
+    states = Want('joint', frozenset(f for f in ('velocity', 'effort') if f not in keep),
+                  topics.joint, topics.strict)
+    wanted = {t: states for t in topics.joint_states}
+    for option, topic, needed in (
+            ('--reference', topics.reference, bool(keep & {'reference', 'reference_velocity'})),
+            ('--input', topics.input, 'voltage' in keep)):
+        if needed and topic in wanted:
+            raise ParameterError(f'{option} {topic}: that is the measurement\'s topic; for '
+                                 'the joint\'s own effort use --input effort')
     if keep & {'reference', 'reference_velocity'}:
-        wanted[names['reference']] = ('joint', frozenset(
+        wanted[topics.reference] = Want('reference', frozenset(
             {'effort'} | ({'position'} if 'reference' not in keep else set())
-            | ({'velocity'} if 'reference_velocity' not in keep else set())))
-    if 'voltage' in keep:
-        wanted[names['voltage']] = ('scalar', frozenset())
-    return path, size, names, wanted
+            | ({'velocity'} if 'reference_velocity' not in keep else set())),
+            topics.reference_joint, topics.reference_given)
+    if 'voltage' in keep and topics.input is not None:
+        wanted[topics.input] = Want('input', frozenset({'position', 'velocity'}),
+                                    topics.input_joint, topics.strict)
+    return bag, bag.size, names, wanted, topics
 
 
-def joint_states_of(path: Path, reader: Any, names: Mapping[str, str], damage: Any) -> Any:
+def joint_states_of(path: Path, reader: Any, names: dict[str, str | None], damage: Any,
+                    topics: RunTopics) -> Any:
     """Warn about undecodable messages; return the joint-state topic or raise one line.
 
+    The first candidate topic with messages is the measurement (``names`` is updated).
     Shared by :func:`read_run` and the streaming reader of
     :mod:`motor_comp.analysis.streaming` (same checks, same wording).
     """
     for tp in reader.topics.values():
         if tp.corrupt:
             warn(f'{path.name}: {tp.topic}: skipped {tp.corrupt} undecodable messages')
-    js = reader.topics.get(names['joint_states'])
-    if js is None or js.count() == 0:
-        if damage is not None and reader.messages == 0:
-            raise InputFileError(f'{path}: corrupt or truncated at byte {damage.offset} '
-                                 f'({damage.reason}); no messages could be read')
-        found = ', '.join(sorted(reader.all_topics)) or 'none'
-        raise InputFileError(f'{path}: no {names["joint_states"]} messages '
-                             f'(topics in file: {found})')
-    return js
+    for candidate in topics.joint_states:
+        js = reader.topics.get(candidate)
+        if js is not None and js.count():
+            names['joint_states'] = candidate
+            return js
+    if damage is not None and reader.messages == 0:
+        raise InputFileError(f'{path}: corrupt or truncated at byte {damage.offset} '
+                             f'({damage.reason}); no messages could be read')
+    raise InputFileError(f'{path}: no {" or ".join(topics.joint_states)} messages '
+                         f'(topics: {_listing(reader.all_topics)}); '
+                         'pick the JointState topic with --topic T')
+
+
+def _listing(all_topics: Mapping[str, str]) -> str:
+    """``/a [pkg/msg/T], /b [...]`` (what a bag holds, for one-line errors)."""
+    if not all_topics:
+        return 'none'
+    return ', '.join(f'{t} [{ty}]' if ty else t for t, ty in sorted(all_topics.items()))
+
+
+def _read(bag: Bag, reader: _Reader) -> _Damage | None:
+    """Read every file of the bag into ``reader``; return the damage that stopped it."""
+    try:
+        if bag.storage == 'sqlite3':
+            bags.feed_sqlite(bag, reader)
+            return None
+        for i, f in enumerate(bag.files):
+            if i:
+                reader.next_file(f)
+            _complete, damage = reader.read()
+            if damage is not None:
+                if len(bag.files) > 1:
+                    damage.reason = f'{f.name}: {damage.reason}'
+                return damage
+    except OSError as exc:
+        raise InputFileError(f'{bag.path}: cannot read ({exc.strerror or exc})') from None
+    return None
 
 
 def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str = 'axis',
-             joint: str = 'axis', signals: Collection[str] | None = None,
-             require: Collection[str] | Mapping[str, str] = ()) -> Run:
+             signals: Collection[str] | None = None,
+             require: Collection[str] | Mapping[str, str] = (),
+             topics: RunTopics | None = None) -> Run:
     """Read an MCAP run into time-aligned arrays (see the module docstring for policies).
 
     Parameters
     ----------
     path : path-like
-        MCAP file with ``/<namespace>/joint_states`` (required), ``reference`` and
-        ``voltage`` (optional) topics, or a rosbag2 directory holding one such file.
+        MCAP file, or rosbag2 directory (MCAP or sqlite3 storage, split or not), with
+        the joint states (required), reference and drive input (optional) of
+        ``topics``.
     progress : bool
         Print a progress line on stderr while reading.
     namespace : str
-        Topic namespace (DESIGN.md §5), ``axis`` by default.
-    joint : str
-        Joint name to take from multi-joint ``JointState`` messages.
+        Topic namespace (DESIGN.md §5), ``axis`` by default (when ``topics`` is None).
     signals : collection of str, optional
         The :attr:`Run.SIGNALS` to return (``position`` always); the others are not
         kept, which saves memory on long runs.  Default: all.
@@ -931,6 +1078,9 @@ def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str 
         when one is absent or has no finite sample, one :class:`InputFileError` names
         the file, the topic and why, instead of a warning.  A mapping's values are
         appended to the message as a hint.
+    topics : RunTopics, optional
+        Which topics and joint the signals come from (a robot's bag: DESIGN.md §6);
+        default: the §5 topics of ``namespace``, then ``/joint_states``.
 
     Returns
     -------
@@ -944,23 +1094,24 @@ def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str 
         Missing, empty, non-MCAP or unreadable file, no joint-state samples, or a
         required signal is absent.
     """
-    path, size, names, wanted = _prepare(path, namespace, signals, require)
-    prog = Progress(path.name, size, enabled=progress)
-    reader = _Reader(path, wanted, joint, prog)
+    bag, size, names, wanted, topics = _prepare(path, namespace, signals, require, topics)
+    path = bag.path
+    prog = Progress(bag.path.name, size, enabled=progress)
+    reader = _Reader(bag.files[0], wanted, prog)
     try:
-        complete, damage = reader.read()
-    except OSError as exc:
-        raise InputFileError(f'{path}: cannot read ({exc.strerror or exc})') from None
+        damage = _read(bag, reader)
     finally:
         prog.finish()
-    joint_states_of(path, reader, names, damage)
+    joint_states_of(path, reader, names, damage, topics)
     unusable: dict[str, str] = {}
-    run = _assemble(path, reader, names, unusable, damaged=damage is not None)
+    run = _assemble(path, reader, names, unusable, damaged=damage is not None,
+                    effort_input=topics.effort_input, name=bag.name)
     for field in require:
         if getattr(run, field) is None:
             raise InputFileError(_absent(path, reader, names, field, unusable, damage,
                                          hint=require.get(field, '')
-                                         if isinstance(require, Mapping) else ''))
+                                         if isinstance(require, Mapping) else '',
+                                         topics=topics))
     for field, why in unusable.items():
         warn(f'{path.name}: {why}; {field} treated as absent')
     if damage is not None:
@@ -971,16 +1122,25 @@ def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str 
     return run
 
 
-def _absent(path: Path, reader: _Reader, names: Mapping[str, str], field: str,
-            unusable: Mapping[str, str], damage: _Damage | None, hint: str) -> str:
+def _absent(path: Path, reader: _Reader, names: Mapping[str, str | None], field: str,
+            unusable: Mapping[str, str], damage: _Damage | None, hint: str,
+            topics: RunTopics | None = None) -> str:
     """Return the one-line message for a required signal the file does not provide."""
+    effort = field == 'voltage' and topics is not None and topics.effort_input
     topic = names[{'reference': 'reference', 'reference_velocity': 'reference',
-                   'voltage': 'voltage'}.get(field, 'joint_states')]
+                   'voltage': 'voltage'}.get(field, 'joint_states')] \
+        if not effort else names['joint_states']
     if field in unusable:
         why = unusable[field]
+    elif effort:
+        why = (f'--input effort: joint {topics.joint!r} of {topic} has an empty effort '
+               'field; name the input topic with --input TOPIC')
     elif topic not in reader.all_topics:
-        found = ', '.join(sorted(reader.all_topics)) or 'none'
-        why = f'no {topic} messages (topics in file: {found})'
+        why = f'no {topic} messages (topics: {_listing(reader.all_topics)})'
+        if field == 'voltage':
+            why += '; name the drive input with --input effort | TOPIC'
+        elif field.startswith('reference'):
+            why += '; name it with --reference TOPIC[:JOINT]'
     else:
         why = f'the {topic} messages carry no {field}'
     if damage is not None:
@@ -996,8 +1156,9 @@ def _masked(stamp: np.ndarray, values: np.ndarray, present: np.ndarray, bit: int
     return stamp[m], values[m]
 
 
-def _assemble(path: Path, reader: _Reader, names: Mapping[str, str],
-              unusable: dict[str, str], damaged: bool = False) -> Run:
+def _assemble(path: Path, reader: _Reader, names: Mapping[str, str | None],
+              unusable: dict[str, str], damaged: bool = False, effort_input: bool = False,
+              name: str | None = None) -> Run:
     # Memory: each decoded array is concatenated once and released as soon as it has
     # been aligned, so the peak stays near the size of the decoded data.
     js = reader.topics[names['joint_states']]
@@ -1024,8 +1185,15 @@ def _assemble(path: Path, reader: _Reader, names: Mapping[str, str],
                 series[field] = _clean(path, ref.topic, key,
                                        *_masked(rs, ref.get(key), rp, bit), unusable, field)
         del rp, rs
-    volt = reader.topics.get(names['voltage'])
-    if volt is not None and volt.count():
+    volt = reader.topics.get(names['voltage'] or '')
+    if effort_input:
+        series['voltage'] = series.get('effort')        # the same samples, same stamps
+    elif volt is not None and volt.count() and volt.kind == 'joint':
+        vp = volt.get('present').astype(np.uint8)
+        series['voltage'] = _clean(path, volt.topic, 'effort',
+                                   *_masked(volt.get('stamp'), volt.get('effort'), vp,
+                                            cdr.HAS_EFFORT), unusable, 'voltage')
+    elif volt is not None and volt.count():
         vt = volt.get('stamp').astype(np.int64)
         offset = -int(np.median(np.concatenate(js.log_minus_stamp)))
         if abs(offset) > 1_000_000_000:   # stamps and log times are different clocks
@@ -1061,8 +1229,8 @@ def _assemble(path: Path, reader: _Reader, names: Mapping[str, str],
             aligned[field] = vs[np.searchsorted(ts, t_ns, side='right') - 1]
         del ts, vs
     meta: dict[str, Any] = {}
-    for name, rec in reader.metadata.items():
+    for record, rec in reader.metadata.items():
         for k, v in rec.items():
-            meta[k if name == METADATA_NAME else f'{name}/{k}'] = v
-    return Run(t=t_ns / 1e9, position=position[first:stop], metadata=meta, name=path.stem,
-               **aligned)
+            meta[k if record == METADATA_NAME else f'{record}/{k}'] = v
+    return Run(t=t_ns / 1e9, position=position[first:stop], metadata=meta,
+               name=name or path.stem, **aligned)

@@ -347,13 +347,20 @@ def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: floa
     return f'{body} — {100 * share:.0f} % of the residual beyond the noise floor{tail}'
 
 
-def scan(data: Dataset, est: Any, floor: Any, *, units: Units) -> Unexplained:
-    """Return what ``est``'s model leaves on ``data`` (see the module docstring)."""
+def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
+         nrmse: float | None = None) -> Unexplained:
+    """Return what ``est``'s model leaves on ``data`` (see the module docstring).
+
+    ``nrmse``: the model's held-out force NRMSE as its fit reported it (a speed-band
+    weighted fit is scored by its own weighted folds); one figure for one model in
+    every line.  Default: that of the scan's own held-out residual.
+    """
     spec = est.spec
     model = est.model
     r = heldout_residual(data, spec, model)
     den = data.den
-    nrmse = math.sqrt(float(r @ r) / den) if den > 0 else float('nan')
+    if nrmse is None:
+        nrmse = math.sqrt(float(r @ r) / den) if den > 0 else float('nan')
     fnr = float(getattr(floor, 'nrmse', float('nan')))
     vars_ = variables(data, spec, model, r)
     real = _scans(vars_, r, data.fold, data.folds)

@@ -147,7 +147,27 @@ def make_inputs(d: Path) -> Path:
         'mass_kg: 5.4', 'mass_kg: -5.4'))
     (d / 'plant_field.yaml').write_text('plant: pmlm\nmotr: {mass_kg: 5.4}\n')
     (d / 'grid_bad.yaml').write_text('grid: [1, 2]\n')
+    _robot_bag(d / 'robot', run, effort=True)
+    _robot_bag(d / 'robot_noeffort', run, effort=False)
     return d
+
+
+def _robot_bag(path: Path, run: Run, *, effort: bool) -> None:
+    """A robot's sqlite3 bag written by rosbags: /joint_states with shoulder and elbow."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+    store = get_typestore(Stores.ROS2_JAZZY)
+    js, hd = store.types['sensor_msgs/msg/JointState'], store.types['std_msgs/msg/Header']
+    tm = store.types['builtin_interfaces/msg/Time']
+    with Writer(path, version=9, storage_plugin=StoragePlugin.SQLITE3) as w:
+        c = w.add_connection('/joint_states', js.__msgtype__, typestore=store)
+        for k in range(0, len(run), 10):
+            ns = int(round(run.t[k] * 1e9)) + 1_000_000_000
+            e = np.array([0.0, run.voltage[k]]) if effort else np.empty(0)
+            msg = js(header=hd(stamp=tm(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=''),
+                     name=['shoulder', 'elbow'], position=np.array([0.0, run.position[k]]),
+                     velocity=np.empty(0), effort=e)
+            w.write(c, ns, store.serialize_cdr(msg, js.__msgtype__))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -479,6 +499,36 @@ CASES: list[Case] = _run_file_cases() + [
     _c('autotune-task-missing', 'autotune', 'nonexistent --task table',
        'autotune --plant pmlm --model {d}/model.yaml --task {d}/notask.csv -o {d}/at',
        ['--task', 'notask.csv', 'no such file']),
+    # --- robots' bags (issue 25; full tests: test/logs/test_logs_bags*.py)
+    *[_c(f'{cmd}-bag-joint-unknown', cmd, 'a joint the bag does not have',
+         f'{cmd} {{d}}/robot {M} --joint wrist --input effort',
+         ["joint 'wrist' not in /joint_states (has: shoulder, elbow)", '--joint NAME'])
+      for cmd in WB],
+    *[_c(f'{cmd}-bag-joint-unnamed', cmd, 'a multi-joint bag without --joint',
+         f'{cmd} {{d}}/robot {M} --input effort',
+         ["joint 'axis' not in /joint_states (has: shoulder, elbow)", '--joint NAME'])
+      for cmd in WB],
+    _c('fit-bag-topic-missing', 'fit', 'a JointState topic the bag does not have',
+       f'fit {{d}}/robot {M} --topic /arm/joint_states --joint elbow --input effort',
+       ['no /arm/joint_states messages', '/joint_states [sensor_msgs/msg/JointState]',
+        '--topic T']),
+    _c('fit-bag-no-effort', 'fit', '--input effort, the effort field empty',
+       f'fit {{d}}/robot_noeffort {M} --joint elbow --input effort',
+       ["joint 'elbow' of /joint_states has an empty effort field", '--input TOPIC']),
+    _c('fit-bag-no-input', 'fit', 'a bag without the drive input topic',
+       f'fit {{d}}/robot {M} --joint elbow', ['no /axis/voltage messages',
+                                              '--input effort | TOPIC']),
+    _c('analyze-bag-noref', 'analyze', 'a bag without a reference',
+       'analyze {d}/robot --joint elbow', ['no /axis/reference messages',
+                                           '--reference TOPIC[:JOINT]']),
+    _c('fit-joint-all-no-out', 'fit', '--joint all without -o DIR/',
+       f'fit {{d}}/robot {M} --joint all --input effort', ['--joint all', '-o DIR/']),
+    _c('fit-abbreviated', 'fit', 'an abbreviated option (--inp for --input)',
+       f'fit {{d}}/robot {M} --joint elbow --inp effort',
+       ['unrecognized arguments: --inp effort']),
+    _c('import-bag-table-option', 'import', 'a table column option given with a bag',
+       'import {d}/robot --joint elbow --input effort --time 0 -o {d}/r.mcap',
+       ['--time', 'column options of tables']),
     # --- the dispatcher
     _c('main-unknown-command', 'main', 'unknown command', 'frobnicate',
        ['frobnicate'], subprocess=True),

@@ -258,7 +258,7 @@ def test_missing_topic_names_what_is_there(tmp_path: Path) -> None:
     with McapRecorder(path) as rec:
         rec.add_channel('/axis/voltage', schemas.FLOAT64)
         rec.write_cdr('/axis/voltage', cdr.encode_float64(np.array([1.0]))[0].tobytes(), 0)
-    with pytest.raises(InputFileError, match=r'no /axis/joint_states .*topics in file: '
+    with pytest.raises(InputFileError, match=r'no /axis/joint_states .*topics: '
                                              r'/axis/voltage'):
         read_run(path)
 

@@ -91,7 +91,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ``motor-comp fit DIR/run.mcap --model DIR/start.yaml --auto``.
     """
     import argparse
-    p = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=main.__doc__.splitlines()[0],
+                                allow_abbrev=False)
     p.add_argument('case', help='start of a case label, e.g. "coulomb+viscous [" (or "list")')
     p.add_argument('--seed', type=int, default=1)
     p.add_argument('--duration', type=float, default=20.0)
