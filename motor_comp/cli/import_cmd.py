@@ -60,7 +60,6 @@ def run(args: argparse.Namespace) -> int:
     """Import the table and write the MCAP; return the exit status."""
     from pathlib import Path
 
-    from motor_comp.logs import write_run
     from motor_comp.logs.importers import import_table
 
     out = check_output_file(args.output, '-o')
@@ -81,38 +80,30 @@ def run(args: argparse.Namespace) -> int:
                      position_scale=args.position_scale, input_scale=args.input_scale,
                      velocity_scale=args.velocity_scale, effort_scale=args.effort_scale,
                      mat_orient=args.mat_orient, name=out.stem)
-    try:
-        write_run(out, r)
-    except OSError as exc:
-        raise InputFileError(f'{out}: cannot write ({exc.strerror or exc})') from None
-    _written(args, out, r)
+    _write(args, out, r)
     return 0
 
 
 def _bag(args: argparse.Namespace, out: Any) -> int:
     """``import BAG``: one joint of a robot's bag to a canonical run."""
-    from pathlib import Path
-
-    from motor_comp.logs import read_run, write_run
+    from motor_comp.logs import read_run
     table_only = [f'--{k.replace("_", "-")}' for k in (
         'time', 'position', 'velocity', 'reference_velocity', 'effort')
         if getattr(args, k) is not None]
     if table_only:
         raise ParameterError(f'{", ".join(table_only)}: column options of tables; a bag '
                              'is read with --topic, --joint, --input, --reference')
-    if out.resolve() == Path(args.data).resolve():
-        raise InputFileError(f'{out}: output would overwrite the input')
-    r = read_run(args.data, topics=run_topics(args))
+    _write(args, out, read_run(args.data, topics=run_topics(args)))
+    return 0
+
+
+def _write(args: argparse.Namespace, out: Any, r: Any) -> None:
+    """Write the run and say what was written (one JSON object with ``--json``)."""
+    from motor_comp.logs import write_run
     try:
         write_run(out, r)
     except OSError as exc:
         raise InputFileError(f'{out}: cannot write ({exc.strerror or exc})') from None
-    _written(args, out, r)
-    return 0
-
-
-def _written(args: argparse.Namespace, out: Any, r: Any) -> None:
-    """Say what was written (one JSON object with ``--json``)."""
     signals = [s for s in r.SIGNALS if getattr(r, s) is not None]
     if args.json:
         print(json.dumps({'output': str(out), 'samples': len(r), 't_start': float(r.t[0]),
