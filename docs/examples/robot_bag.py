@@ -32,7 +32,9 @@ def write(mat: Path, out: Path, seed: int = 0) -> Path:
     pos = np.column_stack([np.zeros_like(t), angle, swing])
     vel = np.column_stack([np.zeros_like(t), speed, np.gradient(swing, t)])
     eff = np.column_stack([np.zeros_like(t), torque, 0.1 * swing])
-    ns = np.round((t + 1.7e9) * 1e9).astype(np.int64)      # a wall-clock-like stamp
+    # a wall-clock-like stamp, in integer nanoseconds (as a float, 1.7e9 s holds only
+    # 0.24 µs steps)
+    ns = np.round(t * 1e9).astype(np.int64) + 1_700_000_000_000_000_000
     with Writer(out, version=9, storage_plugin=StoragePlugin.SQLITE3) as w:
         c = w.add_connection('/joint_states', js.__msgtype__, typestore=store)
         for i in range(t.size):

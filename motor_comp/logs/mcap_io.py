@@ -60,6 +60,8 @@ from motor_comp.logs.topics import RunTopics
 
 MAGIC = b'\x89MCAP0\r\n'
 _MAX_CHUNK = 1 << 30
+#: stamps up to this [ns] (52 days) are held to the nanosecond as float seconds
+EXACT_STAMP_NS = 2 ** 52
 #: name of the metadata record holding the run parameters
 METADATA_NAME = 'motor_comp'
 
@@ -1057,7 +1059,7 @@ def _read(bag: Bag, reader: _Reader) -> _Damage | None:
 def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str = 'axis',
              signals: Collection[str] | None = None,
              require: Collection[str] | Mapping[str, str] = (),
-             topics: RunTopics | None = None) -> Run:
+             topics: RunTopics | None = None, exact_time: bool = False) -> Run:
     """Read an MCAP run into time-aligned arrays (see the module docstring for policies).
 
     Parameters
@@ -1081,6 +1083,12 @@ def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str 
     topics : RunTopics, optional
         Which topics and joint the signals come from (a robot's bag: DESIGN.md §6);
         default: the §5 topics of ``namespace``, then ``/joint_states``.
+    exact_time : bool
+        Keep the stamps' nanoseconds: stamps beyond :data:`EXACT_STAMP_NS` (wall-clock
+        time, e.g. a robot's bag) are counted from the first measurement (its stamp in
+        ``metadata['time_origin_ns']``); as float seconds since 1970 they would be
+        rounded to 0.24 µs, which the workbench's derivatives feel.  Stamps below
+        (simulation time, imported tables) are kept as they are.
 
     Returns
     -------
@@ -1105,7 +1113,8 @@ def read_run(path: str | os.PathLike, *, progress: bool = False, namespace: str 
     joint_states_of(path, reader, names, damage, topics)
     unusable: dict[str, str] = {}
     run = _assemble(path, reader, names, unusable, damaged=damage is not None,
-                    effort_input=topics.effort_input, name=bag.name)
+                    effort_input=topics.effort_input, name=bag.name,
+                    exact_time=exact_time)
     for field in require:
         if getattr(run, field) is None:
             raise InputFileError(_absent(path, reader, names, field, unusable, damage,
@@ -1158,7 +1167,7 @@ def _masked(stamp: np.ndarray, values: np.ndarray, present: np.ndarray, bit: int
 
 def _assemble(path: Path, reader: _Reader, names: Mapping[str, str | None],
               unusable: dict[str, str], damaged: bool = False, effort_input: bool = False,
-              name: str | None = None) -> Run:
+              name: str | None = None, exact_time: bool = False) -> Run:
     # Memory: each decoded array is concatenated once and released as soon as it has
     # been aligned, so the peak stays near the size of the decoded data.
     js = reader.topics[names['joint_states']]
@@ -1232,5 +1241,9 @@ def _assemble(path: Path, reader: _Reader, names: Mapping[str, str | None],
     for record, rec in reader.metadata.items():
         for k, v in rec.items():
             meta[k if record == METADATA_NAME else f'{record}/{k}'] = v
-    return Run(t=t_ns / 1e9, position=position[first:stop], metadata=meta,
-               name=name or path.stem, **aligned)
+    t = t_ns / 1e9
+    if exact_time and t_ns.size and abs(int(t_ns[0])) > EXACT_STAMP_NS:
+        meta['time_origin_ns'] = int(t_ns[0])
+        t = (t_ns - t_ns[0]) / 1e9
+    return Run(t=t, position=position[first:stop], metadata=meta, name=name or path.stem,
+               **aligned)

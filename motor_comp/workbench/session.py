@@ -52,7 +52,8 @@ def load_run(path: str | Path, topics: RunTopics | None = None) -> Run:
         raise InputFileError(f'{path}: tables are converted first: motor-comp import '
                              f'{path.name} --time COL --input COL --position COL -o RUN.mcap')
     from motor_comp.logs import read_run   # heavy (MCAP stack): load only when needed
-    return read_run(path, require={'voltage': _NEEDS_INPUT}, topics=topics)
+    # exact_time: a robot's wall-clock stamps counted from the run's start, to the ns
+    return read_run(path, require={'voltage': _NEEDS_INPUT}, topics=topics, exact_time=True)
 
 
 def open_session(run_path: str | Path | Sequence[str | Path], model_path: str | Path, *,

@@ -9,6 +9,7 @@ give the model that ``motor-comp import`` of the same table gives, to 1e-9.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -28,6 +29,8 @@ DATA = next((p for p in (Path('/work/shared/data'), REPO.parent / 'shared' / 'da
 pytestmark = pytest.mark.skipif(DATA is None, reason='real data sets not available')
 
 HSM_RUNS = ('idf_pos_0.065_1', 'idf_neg_0.045_1')
+#: 2023-11-14T22:13:20Z in ns: the ODrive bags carry wall-clock stamps
+WALL_CLOCK_NS = 1_700_000_000_000_000_000
 J0 = 1.2153e-4
 
 
@@ -71,7 +74,8 @@ def recorded(tmp_path_factory):
                      '-o', str(root / 'odrive.mcap')]) == 0
     odrive = read_run(root / 'odrive.mcap', topics=RunTopics.of())
     runs['odrive']['import'] = [root / 'odrive.mcap']
-    ns = np.round(odrive.t * 1e9).astype(np.int64)
+    # wall-clock stamps, as a robot's (as float seconds they would lose 0.24 µs)
+    ns = np.round(odrive.t * 1e9).astype(np.int64) + WALL_CLOCK_NS
     for storage in ('sqlite3', 'mcap'):
         joints = {'odrive_axis': {'position': odrive.position, 'velocity': None,
                                   'effort': odrive.voltage}}
@@ -141,7 +145,11 @@ def test_the_other_storage_gives_the_same_run(recorded, axis, storage, joint) ->
     _, runs = recorded
     sel = RunTopics.of(joint=joint, input='effort')
     for imp, bag in zip(runs[axis]['import'], runs[axis][storage]):
-        a, b = read_run(imp), read_run(bag, topics=sel)
+        a, b = read_run(imp), read_run(bag, topics=sel, exact_time=True)
+        if axis == 'odrive':      # wall-clock stamps: counted from the first, to the ns
+            assert b.metadata['time_origin_ns'] == round(a.t[0] * 1e9) + WALL_CLOCK_NS
+            np.testing.assert_allclose(b.t, a.t - a.t[0], rtol=0, atol=1e-12)
+            b = dataclasses.replace(b, t=a.t)
         for sig in ('t', 'position', 'velocity', 'voltage'):
             x, y = getattr(a, sig), getattr(b, sig)
             assert (x is None and y is None) or np.array_equal(x, y), sig
