@@ -274,8 +274,11 @@ def payload(path: Path, *, duration: float, window: tuple[float, float],
             namespace: str) -> Any:
     """Return the recorded run cut to the segment's payload ``window`` (trajectory time)."""
     from motor_comp.logs import read_run
-    run = read_run(path, require={'voltage': 'the fit needs the command autotune sent'})
-    t0 = reference_end(path, namespace) - duration
+    # exact_time: a real drive's wall-clock stamps to the ns, as `motor-comp fit` reads them
+    run = read_run(path, require={'voltage': 'the fit needs the command autotune sent'},
+                   exact_time=True)
+    t0 = reference_end(path, namespace) - duration \
+        - run.metadata.get('time_origin_ns', 0) / 1e9
     dt = float(run.t[1] - run.t[0]) if len(run) > 1 else 0.0
     part = run.slice(t0 + window[0] - 0.25 * dt, t0 + window[1] + 0.25 * dt)
     if len(part) < 2:
