@@ -172,15 +172,21 @@ class Engine:
         return self._floors[(id(self.data_for(est.spec)), model_signature(est.model))][1]
 
     def pays(self, sse0: float, sse1: float, dp: int, data: Dataset | None = None, *,
-             floor: float = 0.0) -> tuple[bool, float, float]:
+             floor: float | Callable[[], float] = 0.0) -> tuple[bool, float, float]:
         """Return (supported, explained, BIC change) of going from ``sse0`` to ``sse1``.
 
         ``floor`` is the SSE the noise floor leaves on the same rows (see the module
-        docstring for the rule).
+        docstring for the rule), or a function returning it: it is then called only
+        when it can decide, i.e. when the held-out gain and the BIC both pass.
         """
         data = data or self.data
         explained = 1.0 - sse1 / sse0 if sse0 > 0 else 0.0
         b = bic(data.n_eff, sse0, sse1, dp)
+        if not (explained >= self.min_gain and b < 0):
+            # fails whatever the floor: do not simulate the model's run for it
+            return False, float(explained), float(b)
+        if callable(floor):
+            floor = floor()
         f = self.nrmse(floor, data) if floor > 0 else 0.0
         # the floor lowers the bar only for a term that removes most of what the
         # model leaves above the floor: far from it, a small fall is a flexible term
@@ -191,7 +197,7 @@ class Engine:
         need = min(self.min_drop, (NEAR_FLOOR - 1.0) * f) if f > 0 and most \
             else self.min_drop
         fall = self.nrmse(sse0, data) - max(self.nrmse(sse1, data), f)
-        ok = explained >= self.min_gain and b < 0 and fall >= need
+        ok = fall >= need
         return bool(ok), float(explained), float(b)
 
     def h0(self, model: AxisModel) -> Estimate:
@@ -223,7 +229,8 @@ class Engine:
         spec = base.spec.with_(name, eta)
         est = estimate(D, spec, base.model, cv=False)
         dp = n_params(spec) - n_params(base.spec)
-        floor = self.floor_sse(base, D)
+        # the noise floor (a simulation of the run) only when the rule needs it
+        floor = lambda: self.floor_sse(base, D)  # noqa: E731
         ok, explained, b = self.pays(sse0, sse, dp, D, floor=floor)
         why_not = est.inadmissible.get(name, '')
         if not ok and not why_not and explained >= self.min_gain and any(
@@ -257,7 +264,7 @@ class Engine:
         D = self.data_for(est.spec)
         sse_given = self.sse_given if D is self.given_data else given_sse(D, self.model)
         ok, explained, b = self.pays(sse_given, est.sse_cv, est.n_params, D,
-                                     floor=self.floor_sse(est, D))
+                                     floor=lambda: self.floor_sse(est, D))
         changes = tuple(significant_changes(model_scalars(self.model), est))
         s = common_scale(self.model, est)
         model = est.model
@@ -404,7 +411,7 @@ def pair(eng: Engine, est: Estimate, scored: Sequence[CandidateResult]) \
             sse0 = est.sse_cv if D is eng.data_for(est.spec) else \
                 cv_design(D, est.spec, est.model)[0]
             dp = n_params(second.spec) - n_params(est.spec)
-            ok, _, b = eng.pays(sse0, sse, dp, D, floor=eng.floor_sse(est, D))
+            ok, _, b = eng.pays(sse0, sse, dp, D, floor=lambda: eng.floor_sse(est, D))
             if ok and (best is None or b < best[0]):
                 best = (b, c)
     return None if best is None else best[1]
@@ -490,7 +497,7 @@ def backward(eng: Engine, est: Estimate, just: str, step: Step,
                 if _extra_flat(est, n, sub):
                     trials.append((est.spec.without(n).with_(sub), sub))
             D = eng.data_for(est.spec)
-            floor = eng.floor_sse(est)
+            floor = lambda: eng.floor_sse(est)  # noqa: E731
             for spec, sub in trials:
                 sse = cv_design(D, spec, est.model)[0]
                 dp = n_params(est.spec) - n_params(spec)
