@@ -70,6 +70,8 @@ class Motion:
                 hit = proc.point_velocity(kin, self.position)
             elif name == 'xg':
                 hit = proc.gms_position(kin, self.position, self.part.gms_scale)
+            elif name == 'xs':
+                hit = proc.smooth_full(self.position, self.part.W)
             elif name == 'shares':
                 half = max(3, int(round(REVERSAL_HALF * kin.window)))
                 eps = max(kin.quantum(), kin.noise_std())
@@ -101,6 +103,8 @@ class Motion:
     def xg(self) -> np.ndarray:
         """Position the GMS elements are driven by."""
         return self._get('xg')
+
+    smoothed = property(lambda self: self._get('xs'))   # S·position: both stencils' input
 
     @property
     def shares(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -492,8 +496,7 @@ class View:
         """Return the velocity or acceleration of the smoothed position at the rows."""
         which = sig.value
         return self.data.cached(self.key(('signal', which)), lambda: self._weigh(
-            np.concatenate([proc.stencil(proc.smooth_full(mo.position, p.W), p.rows,
-                                         p.kin.dt, which)
+            np.concatenate([proc.stencil(mo.smoothed, p.rows, p.kin.dt, which)
                             for p, mo in zip(self.data.parts, self.motions)])))
 
     def smooth(self, fn: Any, key: tuple, *, uses_input: bool = False,
