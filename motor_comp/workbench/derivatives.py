@@ -22,6 +22,9 @@ from motor_comp.errors import InputFileError, ParameterError
 from motor_comp.logs.run import Run
 from motor_comp.workbench.savgol import savgol_filter
 
+#: delayed inputs a :class:`Kinematics` keeps (each one array of the run's length)
+INPUT_CACHE = 8
+
 
 class InputHold(enum.Enum):
     """How the logged input relates to the motion between samples."""
@@ -72,6 +75,9 @@ class Kinematics:
     hold: InputHold
     resampled: bool = False
     name: str = 'run'
+    #: :meth:`input_at` by delay: the delay search and every view of one delay ask again
+    _inputs: dict = dataclasses.field(default_factory=dict, init=False, repr=False,
+                                      compare=False)
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
@@ -113,6 +119,15 @@ class Kinematics:
         the weights of ``u[k−n−2]``, ``u[k−n−1]``, ``u[k−n]`` are ``f²/2``,
         ``1 − f²/2 − (1 − f)²/2`` and ``(1 − f)²/2``.  A sampled input is interpolated.
         """
+        hit = self._inputs.get(tau)
+        if hit is None:
+            if len(self._inputs) >= INPUT_CACHE:
+                self._inputs.clear()
+            hit = self._inputs[tau] = self._input_at(tau)
+            hit.flags.writeable = False     # shared by every caller
+        return hit
+
+    def _input_at(self, tau: float) -> np.ndarray:
         t, u = self.t, self.u
         if self.hold is InputHold.SAMPLE:
             return np.interp(t - tau, t, u)
