@@ -22,8 +22,10 @@ setup: $(STAMP)
 demo: $(STAMP)
 	$(PY) -m motor_comp.cli.main demo --out demo_out
 
+# two workers, one test file each at a time (--dist loadfile: a module's fixtures are
+# computed once); CPU-bound workbench files overlap the node tests' waiting
 test: $(STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider test
+	$(PY) -m pytest -q -p no:cacheprovider -n 2 --dist loadfile test
 
 lint: $(STAMP)
 	$(PY) -m flake8 motor_comp test bench launch setup.py

@@ -54,6 +54,8 @@ setup(
         'test': [
             'pytest>=7',
             'pytest-timeout',
+            # `make test` runs the suite on two workers, a test file per worker at a time
+            'pytest-xdist>=3',
             'hypothesis>=6',
             'flake8',
             'pydocstyle',
