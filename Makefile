@@ -23,9 +23,11 @@ demo: $(STAMP)
 	$(PY) -m motor_comp.cli.main demo --out demo_out
 
 # two workers, one test file each at a time (--dist loadfile: a module's fixtures are
-# computed once); CPU-bound workbench files overlap the node tests' waiting
+# computed once), CPU-bound workbench files beside the node tests; then the tests that
+# need the machine to themselves (wall-clock timing, marker `alone`), one at a time
 test: $(STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider -n 2 --dist loadfile test
+	$(PY) -m pytest -q -p no:cacheprovider -n 2 --dist loadfile -m 'not alone' test
+	$(PY) -m pytest -q -p no:cacheprovider -m alone test
 
 lint: $(STAMP)
 	$(PY) -m flake8 motor_comp test bench launch setup.py

@@ -196,6 +196,7 @@ def _check_against_lockstep(run, plant: str, controller: str, trajectory: str,
     assert peak < 40.0 * peak_sim, (peak, peak_sim)
 
 
+@pytest.mark.alone   # wall-clock timing: the machine to itself (make test's second part)
 def test_realtime_nodes_track_on_wall_clock(tmp_path: Path, ros_env) -> None:
     """Realtime mode: 1 kHz wall timers, 1 s, the default ball-screw PID tracks.
 
@@ -225,6 +226,7 @@ def test_realtime_nodes_track_on_wall_clock(tmp_path: Path, ros_env) -> None:
     assert 'timing: ' in logs and 'backlog samples skipped' in logs
 
 
+@pytest.mark.alone   # wall-clock timing: the machine to itself (make test's second part)
 def test_realtime_pmlm_adaptive_sliding_stays_bounded(tmp_path: Path, ros_env) -> None:
     """PMLM + adaptive sliding in realtime, 3 s (three 50 mm moves): lockstep accuracy.
 

@@ -19,6 +19,7 @@ from motor_comp.logs import Run, write_run
 from motor_comp.nodes.common import Param, period_ns
 
 
+@pytest.mark.alone   # the replay's pacing on the wall clock: the machine to itself
 @pytest.mark.timeout(90)
 def test_replay_publishes_recorded_run_with_timing(tmp_path: Path, ros_env, probe) -> None:
     """A 0.5 s run replayed at 2× arrives complete, in order, in about 0.25 s."""
@@ -78,7 +79,7 @@ def test_replay_publishes_recorded_run_with_timing(tmp_path: Path, ros_env, prob
 MAX_LATE_SHARE = 0.1
 
 
-@pytest.mark.timeout(90)
+@pytest.mark.timeout(400)
 def test_replay_one_joint_of_a_robot_bag(tmp_path: Path, ros_env, probe) -> None:
     """``replay BAG --joint J --input effort``: the joint, live, on the /axis topics.
 
@@ -94,16 +95,26 @@ def test_replay_one_joint_of_a_robot_bag(tmp_path: Path, ros_env, probe) -> None
     joints = {j: {'position': rng.normal(size=n), 'velocity': rng.normal(size=n),
                   'effort': rng.normal(size=n)} for j in ('shoulder', 'elbow', 'wrist')}
     bag = write_bag(tmp_path / 'arm', 'sqlite3', ns, joints, shuffle_seed=2)
+    # paced (--rate 1, 0.6 s): the probe keeps up on a loaded machine
     proc = subprocess.Popen([sys.executable, '-m', 'motor_comp.cli.main', 'replay', str(bag),
-                             '--joint', 'elbow', '--input', 'effort', '--rate', '0',
+                             '--joint', 'elbow', '--input', 'effort', '--rate', '1',
                              '--wait-for-subscribers', '2', '--startup-delay', '0.5',
                              '--json'],
                             env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     try:
-        probe.spin_until(lambda: min(len(probe.positions), len(probe.voltages)) >= n, 60,
-                         'the replayed joint')
-        out, err = proc.communicate(timeout=30)
+        # a failure bound only (a fresh clone compiles the decoders first): the wait ends
+        # when every sample is in, or when the replay has exited
+        def got() -> int:
+            return min(len(probe.positions), len(probe.voltages))
+
+        def counts() -> str:
+            return (f'the replayed joint ({len(probe.positions)} positions, '
+                    f'{len(probe.voltages)} voltages of {n})')
+        probe.spin_until(lambda: got() >= n or proc.poll() is not None, 240, counts)
+        assert proc.poll() in (None, 0), proc.communicate()[1]
+        probe.spin_until(lambda: got() >= n, 30, counts)   # the tail still in flight
+        out, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()

@@ -58,6 +58,9 @@ def _channel(path: Path) -> tuple[str, str, list]:
         return c.msgtype, c.ext.serialization_format, statuses
 
 
+# once seen failing under heavy load (the wrong model's last verdict ERROR 0.77, not WARN),
+# cause not found: it runs with the machine to itself (make test's second part)
+@pytest.mark.alone
 def test_run_monitor_right_and_wrong_model(tmp_path: Path, ros_env) -> None:
     plant = load_plant('pmlm').model
     right, wrong = tmp_path / 'right.yaml', tmp_path / 'wrong.yaml'

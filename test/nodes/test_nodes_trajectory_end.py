@@ -65,6 +65,7 @@ def test_lockstep_exit_at_end_keeps_the_run_whole(tmp_path: Path, nodes) -> None
     assert 'stopping (done)' in nodes.procs['trajectory_node'].log.read_text()
 
 
+@pytest.mark.alone   # wall-clock ticks: the machine to itself (make test's second part)
 @pytest.mark.parametrize('wait', [False, True], ids=['first-sample', 'wait-for-command'])
 def test_realtime_exit_at_end_then_zero_volts(tmp_path: Path, nodes, probe, wait) -> None:
     duration = 1.0

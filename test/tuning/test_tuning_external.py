@@ -26,7 +26,8 @@ import pytest
 from motor_comp.cli.run import NodeGroup, ros_environment, write_params_file
 from motor_comp.logs import read_run
 
-pytestmark = pytest.mark.timeout(900)   # failure bound only: every wait is on a condition
+pytestmark = [pytest.mark.timeout(900),   # failure bound only: every wait is on a condition
+              pytest.mark.alone]         # a realtime drive: the machine to itself
 
 
 def _fifo_permitted() -> bool:
