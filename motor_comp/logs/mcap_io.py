@@ -1143,7 +1143,8 @@ def _absent(path: Path, reader: _Reader, names: Mapping[str, str | None], field:
         why = unusable[field]
     elif effort:
         why = (f'--input effort: joint {topics.joint!r} of {topic} has an empty effort '
-               'field; name the input topic with --input TOPIC')
+               f'field; name the input topic with --input TOPIC (topics: '
+               f'{_listing(reader.all_topics)})')
     elif topic not in reader.all_topics:
         why = f'no {topic} messages (topics: {_listing(reader.all_topics)})'
         if field == 'voltage':

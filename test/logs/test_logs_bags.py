@@ -155,6 +155,7 @@ def test_bad_selections_name_what_the_bag_has(bags, storage, tmp_path) -> None:
                            'b': {'position': np.ones(50), 'velocity': None, 'effort': None}})
     msg = _error(no_effort, 'joint', 'b', 'input', 'effort')
     assert "joint 'b' of /joint_states has an empty effort field" in msg
+    assert '(topics: /joint_states [sensor_msgs/msg/JointState])' in msg
     # a named joint must be there even in one-joint messages
     one = write_bag(tmp_path / f'one_{storage}', storage, T_NS[:20],
                     {'a': {'position': np.zeros(20), 'velocity': None,
