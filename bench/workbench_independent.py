@@ -472,6 +472,23 @@ def issue23_verdicts(listname: str, outs: list[Outcome23], crashed: int) -> None
         print(f'| false alarm: a feature with share ≥ {100 * FEATURE_SHARE:.0f} % | '
               f'{_share(alarms, len(judged))} |')
         print(f'| NRMSE ≤ {FLOOR_RATIO}× the noise floor | {_share(near, len(judged))} |')
+        # the other side of an honest floor: one far above what the TRUE model leaves
+        # would make any model look complete
+        rel = [(o.floor / o.true_nrmse, o) for o in judged
+               if o.floor is not None and o.true_nrmse]
+        over = [o for r, o in rel if r > FLOOR_RATIO]
+        if rel:
+            q = np.quantile([r for r, _ in rel], [0.1, 0.5, 0.9])
+            print(f'| noise floor / true model\'s NRMSE, p10 / p50 / p90 | '
+                  f'{q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} |')
+            print(f'| noise floor above {FLOOR_RATIO}× the true model\'s NRMSE | '
+                  f'{_share(len(over), len(rel))} |')
+        far = [f'{o.label} s{o.seed} ({o.fit_nrmse / o.floor:.2f}×)' for o in judged
+               if o.floor and o.fit_nrmse > FLOOR_RATIO * o.floor]
+        far += [f'{o.label} s{o.seed} (floor {o.floor / o.true_nrmse:.2f}× the truth\'s)'
+                for o in over]
+        if far:
+            print(f'| beyond either bound | {"; ".join(far)} |')
     ratios = [o.fit_nrmse / o.true_nrmse for o in outs if o.true_nrmse]
     if ratios:
         print(f'| held-out NRMSE / true model\'s, p50 / p90 / max | '

@@ -298,11 +298,16 @@ def theta_of(model: AxisModel, spec: Spec, ctx: Context) -> np.ndarray:
     return np.array([coef.get(lab, 0.0) + extra.get(lab, 0.0) for lab in out_labels])
 
 
-def given_sse(data: Dataset, model: AxisModel) -> float:
-    """Return the SSE of ``model`` as given on the rows (no fitting)."""
+def given_residual(data: Dataset, model: AxisModel) -> np.ndarray:
+    """Return the residual of ``model`` as given at the rows (no fitting) [N or N·m]."""
     spec = spec_of(model)
     d = design(data, spec, model)
-    r = d.y - d.X @ theta_of(model, spec, d.ctx)
+    return d.y - d.X @ theta_of(model, spec, d.ctx)
+
+
+def given_sse(data: Dataset, model: AxisModel) -> float:
+    """Return the SSE of ``model`` as given on the rows (no fitting)."""
+    r = given_residual(data, model)
     return float(r @ r)
 
 
@@ -338,6 +343,6 @@ def values_of(spec: Spec, labs: Sequence[tuple], theta: np.ndarray) -> dict:
 
 
 __all__ = ['Design', 'ORDER', 'Spec', 'context', 'dataset_for', 'design', 'encode',
-           'given_sse', 'labels', 'processing_for', 'reaches_stops',
+           'given_residual', 'given_sse', 'labels', 'processing_for', 'reaches_stops',
            'n_params', 'owned_columns', 'spec_of', 'sticks', 'target', 'term',
            'theta_of', 'values_of', 'view_for']

@@ -185,6 +185,19 @@ def point_position(kin: Kinematics, x: np.ndarray) -> np.ndarray:
                        mode='mirror')
 
 
+def sliding_threshold(kin: Kinematics, v: np.ndarray | None = None) -> float:
+    """Return the speed above which ``kin``'s axis slides [m/s or rad/s].
+
+    Five times the noise of the Savitzky–Golay velocity, estimated from the position
+    noise (or the encoder quantum when the noise is below it) and the filter's own
+    noise gain; never below 0.2 % of the peak speed of ``v`` (default ``kin.v``).
+    """
+    coeff_noise = np.sqrt(np.sum(savgol_coeffs(kin.window, kin.polyorder, deriv=1) ** 2))
+    sigma_x = max(kin.noise_std(), kin.quantum() / np.sqrt(12.0))
+    v = kin.v if v is None else v
+    return max(5.0 * sigma_x * coeff_noise / kin.dt, 2e-3 * float(np.max(np.abs(v))))
+
+
 def sliding_mask(kin: Kinematics, position: np.ndarray | None = None) -> np.ndarray:
     """Select the samples where the axis slides: |ẋ| above 5× its estimation noise.
 
@@ -195,14 +208,10 @@ def sliding_mask(kin: Kinematics, position: np.ndarray | None = None) -> np.ndar
     ``position`` is another position signal on the run's grid (a motor motion across
     a gap); default the measured one.
     """
-    coeff_noise = np.sqrt(np.sum(savgol_coeffs(kin.window, kin.polyorder, deriv=1) ** 2))
-    sigma_x = max(kin.noise_std(), kin.quantum() / np.sqrt(12.0))
     v = kin.v if position is None else correlate1d(
         np.asarray(position, dtype=float), _coeffs(kin.window, kin.polyorder, 1),
         mode='mirror') / kin.dt
-    v_min = 5.0 * sigma_x * coeff_noise / kin.dt
-    v_min = max(v_min, 2e-3 * float(np.max(np.abs(v))))
-    m = np.abs(v) > v_min
+    m = np.abs(v) > sliding_threshold(kin, v)
     # the filter's transient at both ends of the record is not trusted
     m[:kin.window] = False
     m[-kin.window:] = False
@@ -297,17 +306,21 @@ class Processing:
         """Return the smoother length ``W`` [samples] for ``kin``."""
         return smoother_length(kin, self.smoother_scale)
 
+    def stop_margin(self, W: int) -> int:
+        """Return how far [samples] the fitted rows stay from a stop (see ``turns``)."""
+        return 0 if self.turns else W // 2
+
     def rows(self, kin: Kinematics, W: int) -> np.ndarray:
         """Return the fitted samples of ``kin``: sliding, away from the record's ends."""
         if self.turns:
             mask = sliding_mask(kin)
         else:
-            mask = fit_rows_mask(kin, half=W // 2, min_stop=3)
+            mask = fit_rows_mask(kin, half=self.stop_margin(W), min_stop=3)
         mask[:W // 2 + 2] = False
         mask[len(kin) - W // 2 - 2:] = False
         return mask
 
 
 __all__ = ['Processing', 'fit_rows_mask', 'gms_position', 'held_ends', 'kernel', 'point_position',
-           'point_velocity', 'short_window', 'sliding_mask', 'smooth_at', 'smooth_full',
-           'smoother_length', 'stencil', 'stencil_gain']
+           'point_velocity', 'short_window', 'sliding_mask', 'sliding_threshold', 'smooth_at',
+           'smooth_full', 'smoother_length', 'stencil', 'stencil_gain']

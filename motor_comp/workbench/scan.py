@@ -30,8 +30,9 @@ from scipy.fft import next_fast_len
 
 from motor_comp.physics.axis import Units
 from motor_comp.workbench.dataset import Dataset
-from motor_comp.workbench.library import Spec, design, spec_of, theta_of
+from motor_comp.workbench.library import Spec, design, given_residual, spec_of
 from motor_comp.workbench.lsq import solve_gram
+from motor_comp.workbench.spectral import density, stretches
 
 #: least share of the residual's energy, beyond what the floor's record shows, that a
 #: structure must hold to be reported as a feature
@@ -86,7 +87,12 @@ class Feature:
 
 @dataclasses.dataclass(frozen=True)
 class Unexplained:
-    """What the final model leaves: its NRMSE, the noise floor, the features."""
+    """What the final model leaves: its NRMSE, the noise floor, the features.
+
+    ``input_noise_force`` is the logged input's own white noise as a force [N or N·m]
+    (estimated for a measured input, 0 for a command) and ``input_noise_nrmse`` the
+    part of the floor it accounts for (:mod:`.floor`).
+    """
 
     force_nrmse: float
     noise_floor_nrmse: float
@@ -94,11 +100,15 @@ class Unexplained:
     complete: bool
     summary: str
     scans: tuple = ()
+    input_noise_force: float = 0.0
+    input_noise_nrmse: float = 0.0
 
     def as_dict(self) -> dict[str, Any]:
         """Return the JSON form of DESIGN.md §6 ``unexplained``."""
         return {'force_nrmse': float(self.force_nrmse),
                 'noise_floor_nrmse': float(self.noise_floor_nrmse),
+                'input_noise_force': float(self.input_noise_force),
+                'input_noise_nrmse': float(self.input_noise_nrmse),
                 'features': [f.as_dict() for f in self.features],
                 'complete': bool(self.complete), 'summary': self.summary}
 
@@ -127,13 +137,6 @@ def heldout_residual(data: Dataset, spec: Spec, model: Any) -> np.ndarray:
         rows = te[part_of_row]
         out[rows] = y[rows] - X[rows] @ th
     return out
-
-
-def given_residual(data: Dataset, model: Any) -> np.ndarray:
-    """Return the residual of ``model`` as given at the rows [N]."""
-    spec = spec_of(model)
-    d = design(data, spec, model)
-    return d.y - d.X @ theta_of(model, spec, d.ctx)
 
 
 def variables(data: Dataset, spec: Spec, model: Any, r: np.ndarray) -> dict[str, np.ndarray]:
@@ -219,24 +222,6 @@ def _scans(vars_: dict, r: np.ndarray, fold: np.ndarray, folds: int) -> dict:
     return out
 
 
-def _welch(seg: np.ndarray, fs: float, nper: int) -> tuple[np.ndarray, np.ndarray]:
-    """Welch power spectral density of ``seg`` [unit²/Hz] at frequencies [Hz].
-
-    scipy.signal.welch's defaults (periodic Hann window, half overlap, each window's
-    mean removed, one-sided density), written here because importing ``scipy.signal``
-    costs every diagnosis ~0.45 s of CPU (see :mod:`motor_comp.workbench.savgol`); the
-    tests compare the two.
-    """
-    win = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(nper) / nper)
-    step = nper - nper // 2
-    starts = np.arange(0, len(seg) - nper + 1, step)
-    frames = seg[starts[:, None] + np.arange(nper)[None, :]]
-    frames = (frames - frames.mean(axis=1, keepdims=True)) * win
-    p = np.mean(np.abs(np.fft.rfft(frames, axis=1)) ** 2, axis=0) / (fs * float(win @ win))
-    p[1:None if nper % 2 else -1] *= 2.0      # one-sided: all but DC and Nyquist doubled
-    return np.fft.rfftfreq(nper, 1.0 / fs), p
-
-
 def _tone(data: Dataset, r: np.ndarray, t: np.ndarray) \
         -> tuple[float, float, float, np.ndarray]:
     """Return the residual's strongest tone: frequency [Hz], half-width [Hz], share, fit.
@@ -246,26 +231,16 @@ def _tone(data: Dataset, r: np.ndarray, t: np.ndarray) \
     squares over the rows' own times); its share is the energy it removes.
     """
     dt = data.kins[0].dt
-    rows = np.concatenate([p.rows + 10 ** 9 * i for i, p in enumerate(data.parts)])
-    step = int(np.median(np.diff(rows))) if len(rows) > 1 else 1
-    fs = 1.0 / (dt * step)
-    segs = []
-    start = 0
-    gaps = np.flatnonzero(np.diff(rows) != step) + 1
-    for g in list(gaps) + [len(rows)]:
-        if g - start >= 64:
-            segs.append(r[start:g])
-        start = g
+    segs, fs = stretches(data, r, 64)
     none = (0.0, 0.0, 0.0, np.zeros_like(r))
     if not segs:
         return none
     nper = int(min(256, min(len(s) for s in segs)))
-    psd = None
-    f = np.zeros(0)
-    for seg in segs:
-        f, p = _welch(seg - seg.mean(), fs, nper)
-        psd = p * len(seg) if psd is None else psd + p * len(seg)
-    if psd is None or len(psd) < 4 or psd[1:].sum() <= 0:
+    got = density(segs, fs, nper)
+    if got is None:
+        return none
+    f, psd = got
+    if len(psd) < 4 or psd[1:].sum() <= 0:
         return none
     k = int(np.argmax(psd[1:])) + 1
     df = float(f[1] - f[0])
@@ -428,20 +403,26 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
         cur = cur - np.where(np.isfinite(step), step, 0.0)
     near = math.isfinite(fnr) and nrmse <= NEAR_FLOOR * fnr
     complete = near and not feats
+    sig = float(getattr(floor, 'input_noise', 0.0)) * float(model.input_gain)
+    part_in = float(getattr(floor, 'input_nrmse', 0.0))
+    of_it = (f' (the logged input\'s own noise, σ ≈ {sig:.3g} {units.force} as a force, '
+             f'accounts for {100 * part_in:.2f} %)' if part_in > 0 else '')
     if complete:
         summary = (f'complete as far as this run shows: force NRMSE {100 * nrmse:.2f} % at the '
-                   f'noise floor {100 * fnr:.2f} %, and no structure left in the residual')
+                   f'noise floor {100 * fnr:.2f} %{of_it}, and no structure left in the '
+                   'residual')
     elif feats:
         summary = (f'not complete: force NRMSE {100 * nrmse:.2f} % against a noise floor of '
-                   f'{100 * fnr:.2f} %; the residual still holds: '
+                   f'{100 * fnr:.2f} %{of_it}; the residual still holds: '
                    + '; '.join(f.text for f in feats[:3]))
     else:
-        summary = (f'force NRMSE {100 * nrmse:.2f} % against a noise floor of {100 * fnr:.2f} %: '
-                   'more is left than the measurement explains, but no structure against '
-                   'position, velocity, load, time, reversals or frequency stands out')
+        summary = (f'force NRMSE {100 * nrmse:.2f} % against a noise floor of {100 * fnr:.2f} %'
+                   f'{of_it}: more is left than the measurement explains, but no structure '
+                   'against position, velocity, load, time, reversals or frequency stands out')
     return Unexplained(force_nrmse=nrmse, noise_floor_nrmse=fnr, features=tuple(feats),
-                       complete=complete, summary=summary, scans=tuple(profiles))
+                       complete=complete, summary=summary, scans=tuple(profiles),
+                       input_noise_force=sig, input_noise_nrmse=part_in)
 
 
 __all__ = ['FEATURE_SHARE', 'Feature', 'NEAR_FLOOR', 'Profile', 'Unexplained',
-           'given_residual', 'heldout_residual', 'scan']
+           'heldout_residual', 'scan']

@@ -155,21 +155,29 @@ class Engine:
         """Return the SSE the noise floor of ``est``'s model leaves on its rows (cached).
 
         ``data``: other rows to judge it on (a candidate's that reach the stops: the
-        floor there is the turns' too).
+        floor there is the turns' too).  This is the selection's bar
+        (:func:`.floor.noise_floor` with ``bar=True``: what a model still missing terms
+        leaves must not raise it).
         """
         D = data if data is not None else self.data_for(est.spec)
-        key = (id(D), model_signature(est.model))
+        key = (id(D), model_signature(est.model), False)
         hit = self._floors.get(key)
         if hit is None:
-            f = noise_floor(D, est.model, sensor_share=False)
+            f = noise_floor(D, est.model, sensor_share=False, bar=True)
             hit = self._floors[key] = (f.nrmse ** 2 * D.den if math.isfinite(f.nrmse)
                                        else 0.0, f)
         return hit[0]
 
     def floor(self, est: Estimate) -> Floor:
         """Return the noise floor of ``est``'s model (:func:`.floor.noise_floor`)."""
-        self.floor_sse(est)
-        return self._floors[(id(self.data_for(est.spec)), model_signature(est.model))][1]
+        D = self.data_for(est.spec)
+        key = (id(D), model_signature(est.model), True)
+        hit = self._floors.get(key)
+        if hit is None:
+            f = noise_floor(D, est.model, sensor_share=False)
+            hit = self._floors[key] = (f.nrmse ** 2 * D.den if math.isfinite(f.nrmse)
+                                       else 0.0, f)
+        return hit[1]
 
     def pays(self, sse0: float, sse1: float, dp: int, data: Dataset | None = None, *,
              floor: float | Callable[[], float] = 0.0) -> tuple[bool, float, float]:

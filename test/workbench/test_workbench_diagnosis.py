@@ -41,10 +41,12 @@ COMPLETE_SHARE = 0.95
 #: feature of 10 % (the issue's bar; 36 before ripples had to repeat along the travel
 #: and Stribeck's vs reached a third of the high speeds)
 COMPLETE_MEASURED = COMPLETE_SHARE
-#: ... and within 1.5× the reported floor: 29 of 40 (the issue's 95 % is not met).  In
-#: most of the misses the TRUE model is itself over 1.5× the floor (up to 11× on a
-#: 2 kHz force-input sine): the floor does not hold all that the processing leaves
-NEAR_FLOOR_MEASURED = 0.70
+#: ... and within 1.5× the reported floor: 37 of 40 at seed 21 (77 of 80 over seeds 21–22,
+#: 154 of 160 over 21–24; 28 of 40 before the floor was measured on the rows where its
+#: twin replicates the run and held the logged input's own noise).  The three misses are
+#: Stribeck voltage sweeps: the generator's set-valued break-away after each dwell leaves
+#: more than our kernel's twin does (1.6–2.2×)
+NEAR_FLOOR_MEASURED = 0.925
 #: cases of the new-effect list the workbench misses, and why (each must still miss:
 #: a fix fails the test until its entry is removed)
 NEW_EFFECT_MISSES = {
@@ -85,6 +87,8 @@ def _job(job: tuple[str, int, int]) -> dict[str, Any]:
             'fitted': res.model.to_dict(), 'params': res.params,
             'features': [f.as_dict() for f in un.features],
             'nrmse': un.force_nrmse, 'floor': un.noise_floor_nrmse,
+            'input_noise_force': un.input_noise_force, 'input_nrmse': un.input_noise_nrmse,
+            'noise': gen.noise.as_dict(), 'input': case.input,
             'truth_nrmse': truth_nrmse,
             'planted': gen.planted, 'peak': gen.meta.get('position_friction_peak'),
             'errors': parameter_errors(gen.truth, res.model.to_dict())}
@@ -177,7 +181,28 @@ def test_the_noise_floor_is_measured_not_assumed(complete):
     """
     for o in complete:
         assert math.isfinite(o['floor']) and o['floor'] > 0, o['label']
-        assert o['floor'] <= 4.0 * o['nrmse'] + 1e-4, (o['label'], o['floor'], o['nrmse'])
+        # at most 2.44× at seed 21 (pre-sliding sweeps: the twin's GMS at the turns)
+        assert o['floor'] <= 3.0 * o['nrmse'], (o['label'], o['floor'], o['nrmse'])
+
+
+def test_the_logged_inputs_own_noise_is_estimated_not_invented(complete):
+    """A measured current or force carries white noise the twin does not replay.
+
+    The floor estimates its σ from the run's residual spectrum less the twin's over the
+    smoother's passband: close to the generator's where it is estimated, never inflated
+    (a flat excess is required), and nothing for a logged command (what was applied).
+    """
+    measured = [o for o in complete if o['input'] != 'voltage']
+    for o in complete:
+        if o['input'] == 'voltage':
+            assert o['input_noise_force'] == 0.0, o['label']
+            assert o['input_nrmse'] == 0.0, o['label']
+    got = [(o['label'], o['input_noise_force'] / o['noise']['input_noise_force'])
+           for o in measured if o['input_noise_force'] > 0]
+    # 11 of 15 estimated at seed 21: nine at 0.91–1.08×; 1.42× and 0.33× on two runs
+    # where the noise is a fifth to a quarter of the floor
+    assert all(r <= 1.5 for _, r in got), got
+    assert sum(0.8 <= r <= 1.25 for _, r in got) >= 8, got
 
 
 def test_a_ripple_seen_over_two_and_a_half_periods_is_a_ripple(complete):

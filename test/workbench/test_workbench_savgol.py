@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from motor_comp.workbench import savgol
-from motor_comp.workbench.scan import _welch
+from motor_comp.workbench.spectral import welch as _welch
 
 
 @settings(max_examples=60, deadline=None)
