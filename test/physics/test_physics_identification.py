@@ -96,9 +96,12 @@ def test_gms_one_element_column_equals_the_general_kernel_bit_for_bit():
         curve = gms_unit_curve(x, fs, 3e-3, 1.3, 1e-3)
         many = gms_unit_columns_sv(x, curve, np.array([1 / d for d in dists]), 800.0, 1e-3,
                                    np.array(tdamp))
+        decay = np.full(len(x), -1.0)     # shared by the elements, filled as they slip
         for j, (d, td) in enumerate(zip(dists, tdamp)):
-            one = gms_unit_column(x, curve, 1 / d, 800.0, 1e-3, td)
+            one = gms_unit_column(x, curve, 1 / d, 800.0, 1e-3, td, decay)
             assert np.array_equal(many[:, j], one)
+            # the decays filled give the same column again
+            assert np.array_equal(gms_unit_column(x, curve, 1 / d, 800.0, 1e-3, td, decay), one)
 
 
 def test_declared_needs_say_no_where_the_physics_does():
