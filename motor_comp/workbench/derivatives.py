@@ -136,13 +136,11 @@ class Kinematics:
         f = q - n
         if f > 1.0 - 1e-12:   # a whole sample, up to rounding
             n, f = n + 1, 0.0
-        k = np.arange(len(u))
         # before the first sample the command is held at u[0], after the last at u[-1]
-        last = len(u) - 1
-        out = (1.0 - 0.5 * f * f - 0.5 * (1.0 - f) ** 2) * u[np.clip(k - n - 1, 0, last)]
-        out += 0.5 * (1.0 - f) ** 2 * u[np.clip(k - n, 0, last)]
+        out = (1.0 - 0.5 * f * f - 0.5 * (1.0 - f) ** 2) * _shifted(u, n + 1)
+        out += 0.5 * (1.0 - f) ** 2 * _shifted(u, n)
         if f > 0.0:
-            out += 0.5 * f * f * u[np.clip(k - n - 2, 0, last)]
+            out += 0.5 * f * f * _shifted(u, n + 2)
         return out
 
     def quantum(self) -> float:
@@ -175,6 +173,29 @@ def _uniform(t: np.ndarray) -> tuple[bool, float]:
     dt = float(np.median(dts))
     irregular = bool(np.max(np.abs(dts - dt)) > 1e-3 * dt)
     return irregular, dt
+
+
+def _shifted(u: np.ndarray, s: int) -> np.ndarray:
+    """Return ``u[clip(k − s, 0, len − 1)]`` for every ``k``: ``u`` delayed by ``s`` samples.
+
+    Held at the first (last) value beyond the record: the same values as the gather
+    through clipped indices, by slices (the delay search asks for many delays).
+    """
+    n = len(u)
+    out = np.empty(n, dtype=u.dtype)
+    if n == 0:
+        return out
+    if s >= n:
+        out[:] = u[0]
+    elif s >= 0:
+        out[:s] = u[0]
+        out[s:] = u[:n - s]
+    elif -s >= n:
+        out[:] = u[-1]
+    else:
+        out[:n + s] = u[-s:]
+        out[n + s:] = u[-1]
+    return out
 
 
 def kinematics(run: Run, *, window_s: float = 0.02, polyorder: int = 3,

@@ -16,7 +16,9 @@ from hypothesis import given, settings, strategies as st
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import TERMS, VOCABULARY, make_effect
 from motor_comp.physics.effects.identification import Context, Summary
-from motor_comp.physics.effects.presliding import gms_trajectory, gms_unit_columns
+from motor_comp.physics.effects.presliding import gms_trajectory, gms_unit_column, \
+    gms_unit_columns, gms_unit_columns_sv, gms_unit_curve
+from motor_comp.physics.effects.ripple import sin_cos_columns
 
 
 def summary(**kw) -> Summary:
@@ -84,6 +86,34 @@ def test_gms_columns_in_one_pass_equal_one_element_at_a_time():
         one = gms_trajectory(x, np.ones(1), np.array([1.0 / d]), np.zeros(1), 800.0, 1.0,
                              1.4, 3e-3, 1.3, 1e-3)
         assert np.max(np.abs(many[:, j] - one)) == 0.0
+
+
+def test_gms_one_element_column_equals_the_general_kernel_bit_for_bit():
+    rng = np.random.default_rng(4)
+    x = np.cumsum(rng.normal(0, 2e-6, 4000)) + 1e-4 * np.sin(np.linspace(0, 30, 4000))
+    dists = (2e-6, 7e-6, 3e-5)
+    tdamp = (0.0, 1.4e-3, 3e-4)
+    for fs in (1.0, 1.4):
+        curve = gms_unit_curve(x, fs, 3e-3, 1.3, 1e-3)
+        many = gms_unit_columns_sv(x, curve, np.array([1 / d for d in dists]), 800.0, 1e-3,
+                                   np.array(tdamp))
+        decay = np.full(len(x), -1.0)     # shared by the elements, filled as they slip
+        for j, (d, td) in enumerate(zip(dists, tdamp)):
+            one = gms_unit_column(x, curve, 1 / d, 800.0, 1e-3, td, decay)
+            assert np.array_equal(many[:, j], one)
+            # the decays filled give the same column again
+            assert np.array_equal(gms_unit_column(x, curve, 1 / d, 800.0, 1e-3, td, decay), one)
+
+
+def test_ripple_columns_in_one_pass_are_numpys_sine_and_cosine():
+    # the same product and libm calls: equal bit for bit where numpy's float64 sin/cos
+    # are the libm's (so on the project's machines); within an ulp wherever they are not
+    rng = np.random.default_rng(7)
+    x = np.concatenate([rng.uniform(-0.1, 0.1, 20000), rng.uniform(-50.0, 50.0, 20000)])
+    for w in (1.0, 2 * np.pi / 0.0291, 2 * np.pi * 6 / 0.0117):
+        sc = sin_cos_columns(w, x)
+        np.testing.assert_array_max_ulp(sc[:, 0], np.sin(w * x), maxulp=1)
+        np.testing.assert_array_max_ulp(sc[:, 1], np.cos(w * x), maxulp=1)
 
 
 def test_declared_needs_say_no_where_the_physics_does():

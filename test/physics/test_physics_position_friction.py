@@ -24,7 +24,8 @@ from motor_comp.errors import ParameterError
 from motor_comp.physics import AxisModel
 from motor_comp.physics import kernel as K
 from motor_comp.physics.effects import make_effect
-from motor_comp.physics.effects.position_friction import MAX_KNOTS, PositionFriction
+from motor_comp.physics.effects.position_friction import MAX_KNOTS, PositionFriction, \
+    slope_matrix
 
 FAST = settings(max_examples=80, deadline=None)
 
@@ -256,6 +257,29 @@ def test_rotary_axis_reads_rad_and_newton_metres():
     pf = make_effect('position_friction', {'x': [0.0, math.pi], 'dfc': [-2.0, 0.0]})
     with pytest.raises(ParameterError, match='N·m at x = 0 rad'):
         AxisModel(mass=0.01, axis='rotary', effects=(make_effect('coulomb', {'fc': 1.0}), pf))
+
+
+def test_compiled_basis_equals_the_array_form_bit_for_bit():
+    # the Hermite weights as numpy array operations (the form before the compiled pass)
+    rng = np.random.default_rng(5)
+    for n in (2, 3, 8, 16):
+        knots = np.sort(rng.uniform(-0.05, 0.05, n))
+        x = 0.06 * np.sin(np.linspace(0.0, 40.0, 5000)) + 1e-5 * rng.standard_normal(5000)
+        x[::97] = knots[n // 2]                       # exactly at a knot
+        S = slope_matrix(knots)
+        xc = np.clip(x, knots[0], knots[-1])
+        lo = np.clip(np.searchsorted(knots, xc, side='right') - 1, 0, n - 2)
+        hi = lo + 1
+        h = knots[hi] - knots[lo]
+        t = (xc - knots[lo]) / h
+        s = 1.0 - t
+        rows = np.arange(len(x))
+        ref = np.zeros((len(x), n))
+        ref[rows, lo] = (1.0 + 2.0 * t) * s * s
+        ref[rows, hi] = t * t * (3.0 - 2.0 * t)
+        ref += (h * t * s * s)[:, None] * S[lo] - (h * t * t * s)[:, None] * S[hi]
+        B = _pf(knots, np.zeros(n)).basis(x)
+        assert np.array_equal(B, ref) and np.array_equal(np.signbit(B), np.signbit(ref))
 
 
 def test_regressors_are_basis_times_direction():

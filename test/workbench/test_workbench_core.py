@@ -61,6 +61,15 @@ def test_zoh_input_is_centred_and_delayed_exactly():
     np.testing.assert_allclose(q[k:k + 2], [0.28125, 0.96875], atol=1e-9)
 
 
+def test_delayed_input_by_slices_equals_the_clipped_gather():
+    from motor_comp.workbench.derivatives import _shifted
+    u = np.random.default_rng(6).standard_normal(40)
+    k = np.arange(len(u))
+    for s in range(-45, 46):
+        assert np.array_equal(_shifted(u, s), u[np.clip(k - s, 0, len(u) - 1)])
+    assert _shifted(np.zeros(0), 3).shape == (0,)
+
+
 @pytest.mark.parametrize('frac', [0.0, 0.1, 0.25, 0.5, 0.77, 1.0, 2.4, 7.93])
 def test_zoh_input_matches_the_second_difference_of_the_motion(frac):
     """``input_at(τ)`` is what the 3-point second difference of the motion sees.

@@ -119,6 +119,31 @@ def position_friction_dfc(x, knots, values, slopes):
     return out
 
 
+@njit(cache=True)
+def _hermite_basis(t, h, lo, slopes):
+    """Rows of :meth:`PositionFriction.basis`: cubic Hermite weights of every knot value.
+
+    Row ``i`` lies in the interval ``lo[i]`` (length ``h[i]``, local coordinate
+    ``t[i]``): the end values' weights at ``lo``/``lo + 1`` plus the slopes' weights
+    through ``m = S·dfc``, each product in the order the array form took them.
+    """
+    n, k = t.shape[0], slopes.shape[0]
+    out = np.zeros((n, k))
+    for i in range(n):
+        ti = t[i]
+        si = 1.0 - ti
+        a = h[i] * ti * si * si
+        b = h[i] * ti * ti * si
+        j0 = lo[i]
+        for j in range(k):
+            # 0.0 + …: the array form added into zeros (a −0.0 product becomes +0.0)
+            out[i, j] = 0.0 + (a * slopes[j0, j] - b * slopes[j0 + 1, j])
+        # the end values' weights: the array form assigned them into zeros, then added
+        out[i, j0] = (1.0 + 2.0 * ti) * si * si + out[i, j0]
+        out[i, j0 + 1] = ti * ti * (3.0 - 2.0 * ti) + out[i, j0 + 1]
+    return out
+
+
 def slope_matrix(knots: np.ndarray) -> np.ndarray:
     """Return ``S`` (n × n) with the knot slopes of the clamped spline ``m = S·dfc`` [1/m].
 
@@ -254,17 +279,10 @@ class PositionFriction(Effect):
         hi = lo + 1
         h = knots[hi] - knots[lo]
         t = (xc - knots[lo]) / h
-        s = 1.0 - t
-        rows = np.arange(x.shape[0])
-        out = np.zeros((x.shape[0], n))
         # the Hermite weights of spline_sum: the values at lo/hi and, through the
-        # slopes m = S·dfc, every knot value
-        # one (row, lo) and one (row, hi) pair per row, lo != hi: plain fancy-index
-        # assignment is exact here (np.add.at was 5x slower inside the searches)
-        out[rows, lo] = (1.0 + 2.0 * t) * s * s
-        out[rows, hi] = t * t * (3.0 - 2.0 * t)
-        out += (h * t * s * s)[:, None] * slopes[lo] - (h * t * t * s)[:, None] * slopes[hi]
-        return out
+        # slopes m = S·dfc, every knot value (compiled: one pass over the n × knots
+        # output instead of eight array passes, 0.3 s of a 60 s run's fit)
+        return _hermite_basis(t, h, lo, np.ascontiguousarray(slopes))
 
     def regressors(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Columns ``b_j(x)·sgn(v)``; coefficients ``dfc_j`` [N]."""

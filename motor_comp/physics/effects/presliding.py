@@ -388,6 +388,63 @@ def gms_unit_columns_sv(x, curve, inv_d, C, dt, tdamp):
     return out
 
 
+@njit(cache=True)
+def gms_unit_column(x, curve, inv_d, C, dt, tdamp, decay):
+    """One column of :func:`gms_unit_columns_sv`: the element of ``1/d = inv_d`` alone.
+
+    The workbench computes its columns one element at a time (a search moves one
+    distance); the general kernel's per-element loops and unused friction sum cost it
+    two thirds of its time on one element.  The same element law as :func:`gms_step`,
+    operation for operation, so the column is bit for bit the general kernel's.
+    ``decay`` (one per step, negative where not yet known) holds the slip decay
+    ``e^{−C·dt/|s|}`` of each step: it depends on the curve and ``C`` only, not on the
+    element, so the elements and distances a search tries share it (filled here where
+    an element first slips; the exponential was half of the column's cost).
+    """
+    n = x.shape[0]
+    out = np.zeros(n)
+    f = 0.0
+    slip = 0.0
+    for j in range(1, n):
+        dx = x[j] - x[j - 1]
+        v = dx / dt
+        s_v = curve[j]
+        sv = np.sign(v)
+        f_old = f
+        if slip != 0.0 and sv != slip:
+            slip = 0.0            # velocity reversal (or rest): the element sticks again
+        if slip == 0.0:
+            f = f_old + inv_d * dx
+            lim = abs(s_v)
+            if sv != 0.0 and abs(f) >= lim and np.sign(f) == sv:
+                f = np.sign(f) * lim
+                slip = sv
+        else:
+            e = decay[j]
+            if e < 0.0:
+                e = np.exp(-C * dt / abs(s_v)) if s_v != 0.0 else 0.0
+                decay[j] = e
+            f = s_v - (s_v - f_old) * e
+        out[j] = f + tdamp * (f - f_old) / dt
+    return out
+
+
+#: slip-decay vectors kept per run motion (the last curves and attractions searched):
+#: one is 8 bytes a sample, and a search moving one parameter returns to few of them
+GMS_DECAYS_KEPT = 4
+
+
+def _decays(p: Any, key: tuple, n: int) -> np.ndarray:
+    """Return the slip decays of the motion ``p`` for ``key`` (unknown: −1), kept few."""
+    kept = p.memo(('gms_decays',), dict)
+    hit = kept.get(key)
+    if hit is None:
+        if len(kept) >= GMS_DECAYS_KEPT:
+            del kept[next(iter(kept))]       # the oldest
+        hit = kept[key] = np.full(n, -1.0)
+    return hit
+
+
 #: the element distances of the family the search starts from, relative to its scale
 GMS_FAMILY = (0.3, 1.0, 3.0)
 #: most elements the structure search grows to
@@ -491,8 +548,8 @@ class PreslidingTerm(Term):
                 xg = np.ascontiguousarray(p.xg)
                 curve = p.memo(('gms_curve', ratio, vs, dl),
                                lambda: gms_unit_curve(xg, 1.0 + ratio, vs, dl, p.dt))
-                return gms_unit_columns_sv(xg, curve, inv[j:j + 1], c, p.dt,
-                                           td[j:j + 1])[:, 0]
+                return gms_unit_column(xg, curve, float(inv[j]), c, p.dt, float(td[j]),
+                                       _decays(p, (ratio, vs, dl, c), len(xg)))
             return block
         return [Column(f'b{j}', ('gms', d, c, ratio, vs, dl, t), block_of(j), lo=0.0)
                 for j, (d, t) in enumerate(zip(dists, tdamp))]
