@@ -151,6 +151,14 @@ class Engine:
         den = (data or self.data).den
         return math.sqrt(sse / den) if den > 0 else float('inf')
 
+    def _floor(self, est: Estimate, D: Dataset, bar: bool) -> Floor:
+        """Return :func:`.floor.noise_floor` of ``est``'s model on ``D`` (cached)."""
+        key = (id(D), model_signature(est.model), bar)
+        hit = self._floors.get(key)
+        if hit is None:
+            hit = self._floors[key] = noise_floor(D, est.model, sensor_share=False, bar=bar)
+        return hit
+
     def floor_sse(self, est: Estimate, data: Dataset | None = None) -> float:
         """Return the SSE the noise floor of ``est``'s model leaves on its rows (cached).
 
@@ -160,24 +168,12 @@ class Engine:
         leaves must not raise it).
         """
         D = data if data is not None else self.data_for(est.spec)
-        key = (id(D), model_signature(est.model), False)
-        hit = self._floors.get(key)
-        if hit is None:
-            f = noise_floor(D, est.model, sensor_share=False, bar=True)
-            hit = self._floors[key] = (f.nrmse ** 2 * D.den if math.isfinite(f.nrmse)
-                                       else 0.0, f)
-        return hit[0]
+        f = self._floor(est, D, True)
+        return f.nrmse ** 2 * D.den if math.isfinite(f.nrmse) else 0.0
 
     def floor(self, est: Estimate) -> Floor:
-        """Return the noise floor of ``est``'s model (:func:`.floor.noise_floor`)."""
-        D = self.data_for(est.spec)
-        key = (id(D), model_signature(est.model), True)
-        hit = self._floors.get(key)
-        if hit is None:
-            f = noise_floor(D, est.model, sensor_share=False)
-            hit = self._floors[key] = (f.nrmse ** 2 * D.den if math.isfinite(f.nrmse)
-                                       else 0.0, f)
-        return hit[1]
+        """Return the reported noise floor of ``est``'s model (:func:`.floor.noise_floor`)."""
+        return self._floor(est, self.data_for(est.spec), False)
 
     def pays(self, sse0: float, sse1: float, dp: int, data: Dataset | None = None, *,
              floor: float | Callable[[], float] = 0.0) -> tuple[bool, float, float]:
