@@ -82,7 +82,9 @@ def test_autotune_drives_an_external_plant(tmp_path, autotune, bare_model, domai
         drive = group.procs['plant_node']
         assert drive.popen.poll() is None          # autotune left the drive running
         assert 'stopping' not in drive.log.read_text()
-    trip = re.search(r"autotune stopped in stage '([^']+)': (\w+ limit)", stderr)
+    # autotune's own trip ("…: speed limit …") or a node's, passed on ("…: controller_node
+    # exited with status 3: … speed limit: …", seen with the suite's load on the cores)
+    trip = re.search(r"autotune stopped in stage '([^']+)': (?:[^\n]*?)(\w+ limit)", stderr)
     if code == 3 and trip:
         # the loop broke a limit on this shared machine (a realtime Python loop on two
         # cores: 2 of 13 runs, in the full suite) — what is checked then is the stop
