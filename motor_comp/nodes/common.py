@@ -871,12 +871,16 @@ def _orphaned(node: Node, parent: int | None) -> bool:
 EXECUTOR_PERIOD_NS = 50_000_000
 
 
-def _wait_acked(node: Node, timeout: float = 2.0) -> None:
+def _wait_acked(node: Node, timeout: float = 4.0) -> None:
     """Let every reliable reader receive what this node published before it exits.
 
     A process that exits right after its last publish takes the samples its readers
     have not acknowledged with it: on a loaded machine a starved recorder then misses
-    the controller's last commands (a realtime run recorded 934 of 1000 steps).
+    the controller's last commands (a realtime run recorded 934 of 1000 steps).  A
+    sample a reader lost is sent again at the writer's next heartbeat, every 3 s in
+    Fast DDS while its history is not full (:class:`Pacer`), so the wait outlasts one
+    (it was 2 s: a lockstep run that tripped at step 481 recorded 209 of its 534
+    commands, once, in a loaded CI run).
     """
     from rclpy.duration import Duration
     deadline = time.monotonic() + timeout
