@@ -8,7 +8,7 @@ drive), where the residual the true model leaves is what the processing itself a
 
 * with the touches left out the true model leaves at most 0.4 % (measured 0.15–0.29 %
   on the eight runs), and several times less than with them in the rows (measured
-  2.0–6.6×);
+  1.9–6.6×);
 * plain reversals of a sine and a creeping axis's noise are not touches.
 """
 from __future__ import annotations
