@@ -93,7 +93,11 @@ def test_realtime_exit_at_end_then_zero_volts(tmp_path: Path, nodes, probe, wait
     # clock (the first tick comes after the first sample), and stamps only increase
     assert grid[-1] == stamps[-1] and np.all(np.diff(grid) == 1_000_000)
     assert 0 <= grid[0] - t0 <= 10_000_000
-    assert after.size - grid.size <= 1 and np.all(after[:after.size - grid.size] < grid[0])
+    # the held start point is published for each measurement before the first tick, so
+    # how many there are is the scheduler's (1 on an idle machine; 2 and 3 seen in CI):
+    # what is asserted is that they all come first, within the grid's own 10 ms bound
+    held = after.size - grid.size
+    assert held <= 10 and np.all(after[:held] < grid[0])
     run = read_run(spec.output)
     # its time origin is a measurement's stamp: the grid is the plant's
     assert np.min(np.abs(run.t - t0 * 1e-9)) < 1e-6
