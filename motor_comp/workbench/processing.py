@@ -44,6 +44,7 @@ from scipy.ndimage import correlate1d
 
 from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.savgol import savgol_coeffs
+from motor_comp.workbench.turns import REVERSAL_HALF
 
 _COEFFS: dict = {}
 
@@ -267,7 +268,6 @@ def touches(kin: Kinematics) -> np.ndarray:
     direction) on the rows within 5 samples of a touch, and that bias alone halved a
     load friction's ``mu``.  The samples returned span each event (at least three).
     """
-    from motor_comp.workbench.turns import REVERSAL_HALF
     half = max(3, int(round(REVERSAL_HALF * kin.window)))
     # the signal whose sign the turn model reads (not the derivative window's, which
     # smooths a one-sample overshoot away)
@@ -304,8 +304,8 @@ def touches(kin: Kinematics) -> np.ndarray:
     cum = np.cumsum(flip)
     lo, hi = np.clip(k - half, 0, len(v)), np.clip(k + half + 1, 0, len(v))
     near &= cum[hi] - cum[lo + 1] == 0
-    for c in k[near]:
-        out[c - 1:c + 2] = True
+    c = k[near]
+    out[c - 1] = out[c] = out[c + 1] = True
     return out
 
 
