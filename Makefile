@@ -15,6 +15,10 @@ $(STAMP): setup.py setup.cfg package.xml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[ros,test,bench,cluster]'
+	# byte-compile the package as a regular (non-editable) pip install does: every
+	# command then loads it without recompiling ~60 modules (~0.1 s a call where the
+	# environment sets PYTHONDONTWRITEBYTECODE)
+	$(PY) -m compileall -q motor_comp > /dev/null
 	touch $(STAMP)
 
 setup: $(STAMP)

@@ -26,10 +26,12 @@ Every command runs as a subprocess ``python -m motor_comp.cli.main …`` of this
 interpreter, once per tree: this tree, and the reference commit (default ``608b6eb``,
 the workbench before its rebuild) checked out in a temporary ``git worktree`` and run
 with that worktree as the working directory (so ``motor_comp`` resolves to the old
-tree; printed once).  Numba compiles on first use and caches: one untimed ``fit
---auto`` per run and tree comes first.  The timed calls alternate tree by tree, and the
-median of ``--repeats`` calls is reported.  CPU time, not wall time: the machine is
-shared, and another process cannot inflate a child's own CPU account.
+tree; printed once).  Each tree's package is byte-compiled first (``compileall``), as
+an installed package is (``make``'s setup does the same).  Numba compiles on first use
+and caches: one untimed ``fit --auto`` per run and tree comes first.  The timed calls
+alternate tree by tree, and the median of ``--repeats`` calls is reported.  CPU time,
+not wall time: the machine is shared, and another process cannot inflate a child's own
+CPU account.
 
 Usage: ``python bench/workbench_speed.py [--repeats N] [--reference REV | --no-reference]``
 """
@@ -329,6 +331,11 @@ def measure(cases: Sequence[Case], trees: Sequence[Tree], repeats: int) \
     """
     startup: dict = {}
     timings: dict = {}
+    for tree in trees:
+        # as installed: byte-compiled (pip compiles a regular install; an editable one
+        # compiles on first import unless PYTHONDONTWRITEBYTECODE is set, as here)
+        subprocess.run([sys.executable, '-m', 'compileall', '-q', 'motor_comp'], cwd=tree.root,
+                       capture_output=True, env=child_env(), check=False)
     for tree in trees:           # warm-up: numba compiles (and caches) on first use
         for case in cases:
             _, proc = timed(tree, command('fit', case))

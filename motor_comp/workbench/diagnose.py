@@ -206,7 +206,8 @@ def diagnose(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *, folds:
         results.insert(0, refit)
     elif refit.supported:
         results.append(dataclasses.replace(refit, supported=False))
-    un = scan(eng.data_for(h0.spec), h0, eng.floor(h0), units=eng.units)
+    un = scan(eng.data_for(h0.spec), h0, eng.floor(h0), units=eng.units,
+              verdicts={c.effect: c for c in results})
     best = next((c for c in results if c.supported), None)
     corr = best.correlations if best is not None else h0.correlations
     final = best.estimate if best is not None and best.estimate is not None else h0

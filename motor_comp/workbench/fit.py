@@ -197,7 +197,8 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
                              f'input_gain is {final.input_gain:.4g}, not '
                              f'{model.input_gain:.4g}', REFIT))
         say(steps[-1].summary)
-    un = scan(eng.data_for(est.spec), est, eng.floor(est), units=u, nrmse=steps[-1].force_nrmse)
+    un = scan(eng.data_for(est.spec), est, eng.floor(est), units=u, nrmse=steps[-1].force_nrmse,
+              verdicts=eng.verdicts.on(est.spec))
     notes = [a.sentence() for a in ambiguities(eng.data_for(est.spec), est)]
     return FitResult(steps=tuple(steps), model=final, uncertainty=unc,
                      identifiability=tuple(notes + identifiability_notes(est.correlations)),

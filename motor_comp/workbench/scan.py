@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -297,7 +297,7 @@ def _where(edges: np.ndarray, means: np.ndarray) -> tuple[float, float, float]:
 
 
 def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: float,
-          units: Units, shape: str) -> str:
+          units: Units, shape: str, refused: str = '') -> str:
     kind = 'friction' if odd else 'force'
     way = 'higher' if amp > 0 else 'lower'
     if against == 'position':
@@ -317,18 +317,27 @@ def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: floa
     body = f'{kind} {way} by {abs(amp):.3g} {units.force} {span}'
     if not odd and against != 'frequency':
         body += ', the same sign both ways'
-    tail = (f'; the library\'s {shape} has this shape (motor-comp fit --add {shape})'
-            if shape else '; no effect in the library has this shape')
+    if shape and refused:
+        # the candidates' verdict on this model stands over the scan's shape hint
+        tail = f'; the library\'s {shape} has this shape, but does not pay here: {refused}'
+    elif shape:
+        tail = f'; the library\'s {shape} has this shape (motor-comp fit --add {shape})'
+    else:
+        tail = '; no effect in the library has this shape'
+
     return f'{body} — {100 * share:.0f} % of the residual beyond the noise floor{tail}'
 
 
 def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
-         nrmse: float | None = None) -> Unexplained:
+         nrmse: float | None = None, verdicts: Mapping[str, Any] | None = None) \
+        -> Unexplained:
     """Return what ``est``'s model leaves on ``data`` (see the module docstring).
 
     ``nrmse``: the model's held-out force NRMSE as its fit reported it (a speed-band
     weighted fit is scored by its own weighted folds); one figure for one model in
-    every line.  Default: that of the scan's own held-out residual.
+    every line.  Default: that of the scan's own held-out residual.  ``verdicts``: the
+    candidates scored on this same model, by effect; a feature whose shape is an
+    effect that did not pay there says so instead of suggesting ``fit --add``.
     """
     spec = est.spec
     model = est.model
@@ -394,8 +403,12 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
         shape = SHAPES.get(key, '')
         if shape and shape in spec.names:
             shape = ''
+        verdict = (verdicts or {}).get(shape) if shape else None
+        refused = '' if verdict is None or verdict.supported else (
+            verdict.why_not or 'it does not pay for its parameters on held-out data')
         feats.append(Feature(against, odd, (lo, hi), beyond, abs(amp),
-                             _text(against, odd, lo, hi, amp, beyond, units, shape), shape))
+                             _text(against, odd, lo, hi, amp, beyond, units, shape, refused),
+                             shape))
         z = vars_[against]
         z = np.abs(z) if odd and against in ('velocity', 'force') else z
         idx = np.clip(np.searchsorted(edges, z, side='right') - 1, 0, len(means) - 1)

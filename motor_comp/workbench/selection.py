@@ -97,6 +97,18 @@ def candidates(spec: Spec, data: Dataset) -> list[str]:
     return out
 
 
+@dataclasses.dataclass(frozen=True)
+class Verdicts:
+    """Candidates scored on one model: the model's term names and each result by effect."""
+
+    names: tuple
+    results: dict
+
+    def on(self, spec: Spec) -> dict:
+        """Return the results when they were scored on ``spec``'s terms, else none."""
+        return self.results if tuple(self.names) == tuple(spec.names) else {}
+
+
 class Engine:
     """Shared state of one diagnose/fit session: the data, H0 and the scoring rule."""
 
@@ -121,6 +133,8 @@ class Engine:
                                  'identify anything: the axis barely moves; record motion '
                                  'over the travel at several speeds')
         self.min_gain, self.min_drop = float(min_gain), float(min_drop)
+        #: the candidates of the last forward round and the model they were scored on
+        self.verdicts = Verdicts((), {})
         self._floors: dict = {}
         self._warm: dict = {}
         #: the given model on the rows it is judged on (the figure ``compare`` reports)
@@ -226,8 +240,9 @@ class Engine:
         sse0 = base.sse_cv if D is self.data_for(base.spec) else \
             cv_design(D, base.spec, base.model)[0]
         # a candidate scored in an earlier round starts from its optimum there
-        sse, eta = cv_candidate(D, base.spec, name, base.model, screen=0.5 * self.min_gain,
-                                start=self._warm.get(name))
+        cand = cv_candidate(D, base.spec, name, base.model, screen=0.5 * self.min_gain,
+                            start=self._warm.get(name))
+        sse, eta = cand.sse_cv, cand.eta
         if eta:
             self._warm[name] = eta
         spec = base.spec.with_(name, eta)
@@ -248,7 +263,7 @@ class Engine:
                 if ok2 and not full.inadmissible.get(name, ''):
                     ok, explained, b, sse, spec = ok2, explained2, b2, full.sse_cv, full.spec
                     est = estimate(D, spec, base.model, cv=False)
-        why_not = est.inadmissible.get(name, '')
+        why_not = est.inadmissible.get(name, '') or cand.why_not
         if why_not:
             ok = False
         eff = est.model.get(name)
@@ -310,6 +325,7 @@ def select(eng: Engine, est: Estimate, step: Step, say: Callable[[str], None],
     for _ in range(max_steps):
         names = [n for n in candidates(est.spec, eng.data) if n not in removed_once]
         scored = [eng.score(est, n) for n in names]
+        eng.verdicts = Verdicts(est.spec.names, {c.effect: c for c in scored})
         ok = [c for c in scored if c.supported]
         if ok:
             best = simpler(eng, est, min(ok, key=lambda c: c.bic_delta), scored)
@@ -506,20 +522,24 @@ def backward(eng: Engine, est: Estimate, just: str, step: Step,
                 sse = cv_design(D, spec, est.model)[0]
                 dp = n_params(est.spec) - n_params(spec)
                 ok, explained, b = eng.pays(sse, est.sse_cv, dp, D, floor=floor)
-                ok = ok and n not in est.inadmissible
+                # a term the others pushed out of its declared domain goes although
+                # it pays: it stands in for something else (said so, not "no longer pays")
+                why = est.inadmissible.get(n, '') if ok else ''
+                ok = ok and not why
                 if not ok and (worst is None or explained < worst[1]):
-                    worst = (n, explained, spec, sub)
+                    worst = (n, explained, spec, sub, why)
         if worst is None:
             return est
-        n, _, spec, sub = worst
+        n, _, spec, sub, why = worst
         est = estimate(eng.data_for(spec), spec, est.model)
         removed_once.add(n)
         if sub is not None:
             step(n, 'remove', est, f'replaced {n} by {sub}: only its shared part still pays')
             step(sub, 'add', est, '')
             continue
-        step(n, 'remove', est, f'removed {n}: no longer pays once the others are in')
+        step(n, 'remove', est, f'removed {n}: {why} (with the others in)' if why
+             else f'removed {n}: no longer pays once the others are in')
 
 
-__all__ = ['CandidateResult', 'Engine', 'PAIR_GAIN', 'backward', 'candidates', 'nested',
-           'pair', 'research', 'select', 'simpler']
+__all__ = ['CandidateResult', 'Engine', 'PAIR_GAIN', 'Verdicts', 'backward', 'candidates',
+           'nested', 'pair', 'research', 'select', 'simpler']

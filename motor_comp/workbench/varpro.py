@@ -532,8 +532,21 @@ def cv_choices(data: Dataset, specs: Sequence[Spec], model: AxisModel | None) ->
     return total
 
 
+@dataclasses.dataclass(frozen=True)
+class CandidateCV:
+    """A candidate's held-out score: SSE, its all-data nonlinear parameters, and why not.
+
+    ``why_not`` is set when the term failed a claim it makes about itself (a ripple
+    that does not repeat along the travel): it then scores as the model without it.
+    """
+
+    sse_cv: float
+    eta: dict
+    why_not: str = ''
+
+
 def cv_candidate(data: Dataset, spec: Spec, name: str, model: AxisModel | None, *,
-                 screen: float = 0.0, start: Mapping | None = None) -> tuple[float, dict]:
+                 screen: float = 0.0, start: Mapping | None = None) -> CandidateCV:
     """Return the held-out SSE of ``spec`` + ``name`` (η chosen in-fold) and the all-data η.
 
     With ``screen`` > 0, a candidate whose all-data (in-sample) gain is below
@@ -543,7 +556,7 @@ def cv_candidate(data: Dataset, spec: Spec, name: str, model: AxisModel | None, 
     """
     t = TERMS[name]
     if not searched(t):
-        return cv_design(data, spec.with_(name), model)[0], {}
+        return CandidateCV(cv_design(data, spec.with_(name), model)[0], {})
     sse0 = vp_sse(data, spec, model) if screen > 0 else math.inf
     eta_all = search(data, spec.with_(name, dict(start or {})), name, model,
                      stop_above=sse0 * (1.0 - 0.5 * screen), refine=screen <= 0)
@@ -551,16 +564,25 @@ def cv_candidate(data: Dataset, spec: Spec, name: str, model: AxisModel | None, 
     if screen > 0:
         sse1 = vp_sse(data, s1, model)
         if sse0 <= 0 or 1.0 - sse1 / sse0 < screen:
-            return cv_design(data, s1, model)[0], eta_all
+            return CandidateCV(cv_design(data, s1, model)[0], eta_all)
         eta_all = refine_structure(data, s1, name, model)
     length = t.repeats_every(eta_all)
-    if length is not None and not block_cv(data, spec.with_(name, eta_all), name, model,
-                                           length).repeats:
-        # it does not repeat along the travel as it claims: no held-out gain
-        return cv_design(data, spec, model)[0], eta_all
+    if length is not None:
+        b = block_cv(data, spec.with_(name, eta_all), name, model, length)
+        if not b.repeats:
+            # it does not repeat along the travel as it claims: no held-out gain
+            seen = b.nothing - b.seen
+            part = (b.nothing - b.held) / seen if seen > 0 else 0.0
+            how = (f'{100 * part:.0f} % as well as where fitted' if part > 0 else
+                   'no better than the model without it')
+            return CandidateCV(cv_design(data, spec, model)[0], eta_all,
+                               'it does not repeat along the travel: fitted with one '
+                               'period of the travel left out at a time, it predicts '
+                               f'that period {how} (a periodic force: '
+                               f'{100 * REPEATS:.0f} % as well or more)')
     trials = fold_trials(data, spec, name, eta_all)
-    return cv_choices(data, [spec.with_(name, e) for e in trials], model), eta_all
+    return CandidateCV(cv_choices(data, [spec.with_(name, e) for e in trials], model), eta_all)
 
 
-__all__ = ['BlockCV', 'Search', 'block_cv', 'searched', 'cv_candidate', 'cv_choices',
-           'cv_design', 'fold_trials', 'refine_structure', 'search', 'vp_sse']
+__all__ = ['BlockCV', 'CandidateCV', 'Search', 'block_cv', 'searched', 'cv_candidate',
+           'cv_choices', 'cv_design', 'fold_trials', 'refine_structure', 'search', 'vp_sse']
