@@ -31,7 +31,7 @@ twin leaves is the sensor's and the processing's.  So the run's residual spectru
 the twin's, over the smoother's passband (:data:`PASSBAND`), divided by the smoother's
 response, is the input noise's density; its median over the band (robust to a line a
 model error puts at one frequency) gives its σ, added to the twin's logged input — when
-the excess is flat over the band (:data:`WHITE`) and within what the logged input's own
+the excess is flat over the band (:data:`WHITE`), and at most what the logged input's own
 second differences can hold (:func:`difference_bound`).  On the generator's current- and
 force-input runs this recovers 0.85–1.04× the true σ where the noise matters to the
 floor.  A logged *command* (ZOH) is what was applied: no noise is estimated for it.  The
@@ -214,11 +214,10 @@ def input_noise(data: Dataset, twin: Dataset, model: AxisModel) -> float:
         return 0.0
     # nor can the input hold more white noise than its own sample-to-sample changes
     # show: the band has a few bins only (≈ 3 at any rate: segment and smoother are
-    # both counted in samples), and a disturbance inside it passes the flatness test
-    if math.sqrt(med) > max(difference_bound(p.kin.u) for p in data.parts
-                            if p.kin.hold is InputHold.SAMPLE):
-        return 0.0
-    return math.sqrt(med)
+    # both counted in samples), and a disturbance inside it passes the flatness test;
+    # the excess beyond that bound is the model's error
+    return min(math.sqrt(med), max(difference_bound(p.kin.u) for p in data.parts
+                                   if p.kin.hold is InputHold.SAMPLE))
 
 
 def difference_bound(u: np.ndarray) -> float:
@@ -230,9 +229,9 @@ def difference_bound(u: np.ndarray) -> float:
     ``1.4826·median|Δ²u|/√6`` is σ (to its sampling error, ~1 % over 20 000 samples) or
     more on a smooth drive signal: 1.4–21× the
     generator's true σ on its 44 current- and force-input runs of the complete and
-    out-of-library lists (seeds 21–22 and 1–2), where the spectral estimate above it
-    was 86× and 282× the truth on the two runs whose model missed a bump and a 7 Hz
-    disturbance.
+    out-of-library lists (seeds 21–22 and 1–2), where the spectral estimate was 86× and
+    282× the truth on the two runs whose model missed a bump and a 7 Hz disturbance
+    (and never above the bound where the model was complete).
     """
     d2 = np.diff(np.asarray(u, dtype=float), 2)
     if d2.size == 0:
