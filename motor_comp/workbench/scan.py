@@ -297,7 +297,7 @@ def _where(edges: np.ndarray, means: np.ndarray) -> tuple[float, float, float]:
 
 
 def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: float,
-          units: Units, shape: str, refused: str = '') -> str:
+          units: Units, shape: str, refused: str = '', inside: str = '') -> str:
     kind = 'friction' if odd else 'force'
     way = 'higher' if amp > 0 else 'lower'
     if against == 'position':
@@ -322,6 +322,11 @@ def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: floa
         tail = f'; the library\'s {shape} has this shape, but does not pay here: {refused}'
     elif shape:
         tail = f'; the library\'s {shape} has this shape (motor-comp fit --add {shape})'
+    elif inside:
+        # the model's own term of this shape leaves it: its law does not follow what is
+        # here, and what it fitted may stand in for part of it
+        tail = (f'; the model\'s {inside} has this shape but its law does not follow it '
+                f'(the {inside} fitted may stand in for part of it)')
     else:
         tail = '; no effect in the library has this shape'
 
@@ -401,14 +406,15 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
             continue
         lo, hi, amp = _where(edges, means)
         shape = SHAPES.get(key, '')
-        if shape and shape in spec.names:
+        inside = shape if shape in spec.names else ''
+        if inside:
             shape = ''
         verdict = (verdicts or {}).get(shape) if shape else None
         refused = '' if verdict is None or verdict.supported else (
             verdict.why_not or 'it does not pay for its parameters on held-out data')
         feats.append(Feature(against, odd, (lo, hi), beyond, abs(amp),
-                             _text(against, odd, lo, hi, amp, beyond, units, shape, refused),
-                             shape))
+                             _text(against, odd, lo, hi, amp, beyond, units, shape, refused,
+                                   inside), shape))
         z = vars_[against]
         z = np.abs(z) if odd and against in ('velocity', 'force') else z
         idx = np.clip(np.searchsorted(edges, z, side='right') - 1, 0, len(means) - 1)

@@ -145,6 +145,25 @@ def test_effects_the_library_lacks_are_reported_where_they_act(out_of_library):
     assert len(hits) >= REPORTED_SHARE * len(outs), missed
 
 
+def test_a_feature_the_models_own_term_has_the_shape_of_says_so(out_of_library):
+    """A structure shaped like a term the model holds is not "no effect has this shape".
+
+    The drag runs end with a Stribeck curve standing in for a speed-dependent friction
+    the library lacks; the feature against speed has Stribeck's shape, and the text
+    says that the model's own Stribeck may stand in for part of it.
+    """
+    from motor_comp.workbench.scan import SHAPES
+    said = 0
+    for o in out_of_library:
+        for f in o['features']:
+            inside = SHAPES.get((f['against'], f['odd']), '')
+            if inside and inside in o['fitted']['effects']:
+                assert 'no effect in the library has this shape' not in f['text'], f['text']
+                assert f"the model's {inside} has this shape" in f['text'], f['text']
+                said += 1
+    assert said >= 2   # the two drag runs at seed 1 among them
+
+
 def test_load_and_position_friction_from_a_bare_model():
     outs = _run('new', NEW_EFFECT_CASES, SEEDS)
     for o in outs:
