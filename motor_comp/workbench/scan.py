@@ -325,8 +325,8 @@ def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: floa
     elif inside:
         # the model's own term of this shape leaves it: its law does not follow what is
         # here, and what it fitted may stand in for part of it
-        tail = (f'; the model\'s {inside} has this shape but its law does not follow it '
-                f'(the {inside} fitted may stand in for part of it)')
+        tail = (f'; the model\'s {inside} has this shape and leaves this: as fitted it '
+                f'does not follow it, or it stands in for something else of this shape')
     else:
         tail = '; no effect in the library has this shape'
 

@@ -150,7 +150,7 @@ def test_a_feature_the_models_own_term_has_the_shape_of_says_so(out_of_library):
 
     The drag runs end with a Stribeck curve standing in for a speed-dependent friction
     the library lacks; the feature against speed has Stribeck's shape, and the text
-    says that the model's own Stribeck may stand in for part of it.
+    says that the model's own Stribeck leaves it (or stands in for something else).
     """
     from motor_comp.workbench.scan import SHAPES
     said = 0
