@@ -60,7 +60,7 @@ from motor_comp.workbench.floor import Floor, noise_floor
 from motor_comp.workbench.scan import NEAR_FLOOR
 from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.library import ORDER, Spec, given_sse, n_params, processing_for, \
-    reaches_stops, spec_of
+    spec_of
 from motor_comp.workbench.lsq import bic
 from motor_comp.workbench.result import CandidateResult, Estimate, estimate
 from motor_comp.workbench.varpro import cv_candidate, cv_design, refine_structure, search, \
@@ -126,7 +126,8 @@ class Engine:
         self.folds = folds
         #: the fitted samples of every model but those whose evidence is at the stops
         self.data = Dataset(self.kins, model, folds=folds)
-        self._stops: Dataset | None = None
+        #: the datasets of specs judged with another processing, by that processing
+        self._other: dict = {}
         D = self.data
         if D.n < folds * 8:
             raise ParameterError(f'{kins[0].name}: only {D.n} samples in motion, too few to '
@@ -147,13 +148,15 @@ class Engine:
                                  > 0.01 * np.sqrt(np.mean((f - f.mean()) ** 2)))
 
     def data_for(self, spec: Spec) -> Dataset:
-        """Return the dataset ``spec`` is judged on (its rows reach the stops or not)."""
-        if not reaches_stops(spec):
+        """Return the dataset ``spec`` is judged on (its terms' processing, one per kind)."""
+        proc = processing_for(spec)
+        if proc == self.data.processing:
             return self.data
-        if self._stops is None:
-            self._stops = Dataset(self.kins, self.model, folds=self.folds,
-                                  processing=processing_for(spec))
-        return self._stops
+        hit = self._other.get(proc)
+        if hit is None:
+            hit = self._other[proc] = Dataset(self.kins, self.model, folds=self.folds,
+                                              processing=proc)
+        return hit
 
     @property
     def summary(self) -> Any:

@@ -231,13 +231,12 @@ def test_the_gap_width_error_is_its_profile_interval():
     as the gap itself: with a smoother twice as long this run is fitted as well by
     1.4 ms of delay and no gap — a choice of processing the run cannot decide.)
     """
-    from motor_comp.workbench.dataset import Dataset
-    from motor_comp.workbench.library import spec_of
+    from motor_comp.workbench.library import dataset_for, spec_of
     from motor_comp.workbench.uncertainty import profile_se
     truth, kin, res = _fitted('asymmetry+delay+backlash', 23)
     w_true = truth['effects']['backlash']['width']
     w = res.model.get('backlash').width
-    D = Dataset([kin], res.model)
+    D = dataset_for([kin], res.model)     # the rows fit judged it on
     prof = profile_se(D, spec_of(res.model), res.model, 'backlash', 'width')
     se = res.uncertainty['backlash']['width']
     assert se >= prof * (1 - 1e-9)
