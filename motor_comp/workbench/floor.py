@@ -227,11 +227,11 @@ def difference_bound(u: np.ndarray) -> float:
     changes only add to them, and the median of their magnitude (×1.4826, the normal
     MAD factor) ignores the steps and transients a few samples make.  So
     ``1.4826·median|Δ²u|/√6`` is σ (to its sampling error, ~1 % over 20 000 samples) or
-    more on a smooth drive signal: 1.4–21× the
-    generator's true σ on its 44 current- and force-input runs of the complete and
-    out-of-library lists (seeds 21–22 and 1–2), where the spectral estimate was 86× and
-    282× the truth on the two runs whose model missed a bump and a 7 Hz disturbance
-    (and never above the bound where the model was complete).
+    more on a smooth drive signal: 1.4–21× the generator's true σ on its 44 current-
+    and force-input runs of the complete and out-of-library lists (seeds 21–22 and
+    1–2), where the spectral estimate was 86× and 282× the truth on the two runs whose
+    model missed a bump and a 7 Hz disturbance (and never above the bound where the
+    model was complete).
     """
     d2 = np.diff(np.asarray(u, dtype=float), 2)
     if d2.size == 0:

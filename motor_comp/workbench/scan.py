@@ -329,7 +329,6 @@ def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: floa
                 f'does not follow it, or it stands in for something else of this shape')
     else:
         tail = '; no effect in the library has this shape'
-
     return f'{body} — {100 * share:.0f} % of the residual beyond the noise floor{tail}'
 
 
