@@ -635,6 +635,23 @@ class ManagedNode(ParamNode, LifecycleNode):
             self.destroy_subscription(entity)
 
 
+def take_newest(sub: Any, msg: Any, info: Any = None) -> tuple[Any, Any, int]:
+    """Return the newest message queued behind ``msg`` on ``sub``, its info, how many skipped.
+
+    A realtime reader wants the latest sample, not the oldest queued one: a lean loop
+    takes one message per wake-up, so a backlog built up during a stall (a slow start)
+    drains only as fast as new samples arrive — never, at a steady rate.  ``info`` is the
+    message info of ``msg`` (reception time …), replaced by that of the newest.
+    """
+    skipped = 0
+    while True:
+        taken = sub.handle.take_message(sub.msg_type, sub.raw)
+        if taken is None:
+            return msg, info, skipped
+        msg, info = taken[0], taken[1]
+        skipped += 1
+
+
 class LeanLoop:
     """A wait-set loop over a node's hot subscriptions and timers.
 

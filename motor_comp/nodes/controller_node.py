@@ -107,7 +107,8 @@ from motor_comp.errors import ParameterError
 from motor_comp.nodes.common import DEFAULT_NAMESPACE, DELAY_BIN_NS, DELAY_BINS, \
     DIAGNOSTICS_READERS, LOOP_QOS, MODEL_DIR, MOTION_LIMITS, REALTIME_PRIORITY, SUB_QOS, \
     TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, ManagedNode, Pacer, Param, Timing, \
-    format_delays, limits_from, read_joint_state, run_node, set_realtime_priority, set_stamp
+    format_delays, limits_from, read_joint_state, run_node, set_realtime_priority, set_stamp, \
+    take_newest
 from motor_comp.control.nominal import derive_nominal
 from motor_comp.physics.config import PlantConfig
 
@@ -248,6 +249,10 @@ class ControllerNode(ManagedNode):
         self._last_meas_ns: int | None = None   # realtime: stamp of the last sample used
         self.duplicates = 0
         self.skipped = 0
+        # realtime: references that arrived after their sample was answered, and the
+        # largest such delay [s]
+        self.ref_behind = 0
+        self.ref_behind_max = 0.0
         # realtime: age of each answered sample when its command leaves [0.1 ms bins]
         self.latency_hist = np.zeros(DELAY_BINS + 1, dtype=np.int64)
         self._rt_refs: dict[int, tuple[float, float, float]] = {}
@@ -384,6 +389,13 @@ class ControllerNode(ManagedNode):
         self._ref_latest = vals
         t_ns = fields[0]
         if self.timing is Timing.REALTIME:
+            last = self._last_meas_ns
+            if last is not None and 0 <= last - t_ns <= self.p['stale_timeout'] * 1e9:
+                # it arrives after its sample was answered (with the latest reference,
+                # extrapolated): a move that starts in the gap is seen only now, and the
+                # axis jumps to catch up
+                self.ref_behind += 1
+                self.ref_behind_max = max(self.ref_behind_max, (last - t_ns) * 1e-9)
             self._ref_stamp_ns = t_ns
             self._rt_refs[t_ns] = vals
             if len(self._rt_refs) > 4096:   # a plant far behind: forget the oldest
@@ -431,13 +443,9 @@ class ControllerNode(ManagedNode):
 
     def _newest(self, msg: JointState | bytes) -> JointState | bytes:
         """Realtime: the newest measurement queued behind ``msg`` (the backlog is skipped)."""
-        sub = self._meas_sub
-        while True:
-            taken = sub.handle.take_message(sub.msg_type, sub.raw)
-            if taken is None:
-                return msg
-            msg = taken[0]
-            self.skipped += 1
+        msg, _, skipped = take_newest(self._meas_sub, msg)
+        self.skipped += skipped
+        return msg
 
     def _realtime_step(self, t_ns: int) -> None:
         """Realtime: one command for a new measurement stamped ``t_ns`` (see module doc)."""
@@ -591,7 +599,9 @@ class ControllerNode(ManagedNode):
             self.get_logger().info(f'timing: {self.steps} commands, {self.skipped} backlog '
                                    f'samples skipped, {self.duplicates} duplicates; sample '
                                    f'age at command (0.1 ms bins, last bin = 20 ms or '
-                                   f'more): {pct}')
+                                   f'more): {pct}; {self.ref_behind} references arrived after '
+                                   f'their sample was answered, at most '
+                                   f'{1e3 * self.ref_behind_max:.1f} ms after')
 
     # -- parameters ------------------------------------------------------------------
     def apply_params(self, changed: Mapping[str, Any], new: Mapping[str, Any]) -> None:

@@ -18,8 +18,9 @@ from the plant and the controller.  A parameter change therefore reaches the loo
 ``lookahead`` ticks.
 
 Realtime: a wall-clock timer at ``control_rate``; trajectory time starts when the plant's
-first measurement (stamped t0) arrives, at ``now₀`` on this node's clock (the start point
-r(0), stamped with the wall clock, is held until then).  From then on each tick publishes
+first measurement (stamped t0; the newest queued) arrives, at its reception time ``now₀``
+on this node's clock (the start point r(0), stamped with the wall clock, is held until
+then).  From then on each tick publishes
 the reference of the plant's sample grid ``t0 + k·T`` one period ahead (every grid point
 not yet published up to ``⌊(now − now₀)/T⌋ + 1``, at most ``CATCH_UP`` missed ones after a
 stall), stamped with its grid time, so the controller finds the reference of exactly
@@ -84,8 +85,12 @@ from motor_comp.param_files import parse_untrusted, read_text
 from motor_comp.nodes.common import DEFAULT_NAMESPACE, JOINT_NAME, LOOP_QOS, MODEL_DIR, \
     MOTION_LIMITS, REALTIME_PRIORITY, Pacer, Param, ParamNode, SUB_QOS, TOPIC_CLOCK, \
     TOPIC_JOINT_STATES, TOPIC_REFERENCE, TOPIC_VOLTAGE, Timing, limits_from, period_ns, \
-    read_clock_ns, read_joint_state, run_node, set_realtime_priority, set_stamp
+    read_clock_ns, read_joint_state, run_node, set_realtime_priority, set_stamp, \
+    take_newest
 
+#: a sample's reception time (rmw's, on the system clock) is used as the start of
+#: trajectory time when it is this recent [ns]; else (a middleware without it) now
+RX_TRUST_NS = 1_000_000_000
 #: SI units of the trajectory fields, for the parameter descriptions
 _UNITS = {'amplitude': 'm', 'period': 's', 'offset': 'm', 'distance': 'm', 'move_time': 's',
           'dwell': 's', 'speeds': 'm/s', 'stroke': 'm', 'acceleration': 'm/s^2',
@@ -301,16 +306,26 @@ class TrajectoryNode(ParamNode):
         # float (not ns·1e-9, which can differ in the last bit)
         self.publish_at(k * (1.0 / self.p['control_rate']), k * self.dt_ns)
 
-    def _on_first_measurement(self, msg: JointState | bytes) -> None:
+    def _on_first_measurement(self, msg: JointState | bytes, info: Any = None) -> None:
         # the subscription is dropped by the next tick (not here: the lean loop is
         # still iterating its subscriptions)
         if self._t0_ns is None and self._loop_closed:
+            # trajectory time counts on this process's clock from the sample's arrival, so
+            # whatever delays it here puts every reference of the run as late (a drive
+            # measures from power-on; 58–116 ms in 4 of 10 starts of autotune on a drive,
+            # and a controller that sees the move start that late kicks the axis past its
+            # acceleration limit): the newest sample, not the oldest queued, and its
+            # reception time, not the time this process got round to it
+            msg, info, skipped = take_newest(self._js_sub, msg, info)
             self._t0_ns = read_joint_state(msg)[0]
-            self._t0_rx_ns = self.get_clock().now().nanoseconds
+            now = self.get_clock().now().nanoseconds
+            rx = info.get('received_timestamp', 0) if isinstance(info, dict) else 0
+            self._t0_rx_ns = rx if 0 < now - rx < RX_TRUST_NS else now
             self.get_logger().info(
                 f'trajectory time starts with the sample stamped {self._t0_ns * 1e-9:.6f} s'
                 + (' (after the controller\'s first command)' if self.p['wait_for_command']
-                   else ''))
+                   else '') + f', received {(now - self._t0_rx_ns) * 1e-6:.1f} ms ago'
+                + (f', {skipped} older queued samples skipped' if skipped else ''))
 
     def _on_command(self, msg: Float64 | bytes) -> None:
         # the controller answered a measurement (with the held start point): the loop is

@@ -69,6 +69,19 @@ def _start_drive(group: NodeGroup, tmp_path: Path, x0: float) -> None:
         ctx.try_shutdown()
 
 
+def _late_references(logs: Path) -> list[float]:
+    """How late [s] references reached the controller: at most, per controller process.
+
+    ``controller_node`` counts the references that arrive after the sample of their
+    stamp was answered (with an older reference, extrapolated) and logs the largest
+    delay when it stops.
+    """
+    pat = re.compile(r'references arrived after their sample was answered, at most '
+                     r'(\d+\.\d+) ms after')
+    return [float(m[1]) * 1e-3 for f in sorted(logs.glob('*controller_node.log'))
+            for m in pat.finditer(f.read_text())]
+
+
 def test_autotune_drives_an_external_plant(tmp_path, autotune, bare_model, domain) -> None:
     if not _fifo_permitted():
         pytest.skip('SCHED_FIFO not permitted here: a realtime loop needs realtime priority')
@@ -82,6 +95,12 @@ def test_autotune_drives_an_external_plant(tmp_path, autotune, bare_model, domai
         drive = group.procs['plant_node']
         assert drive.popen.poll() is None          # autotune left the drive running
         assert 'stopping' not in drive.log.read_text()
+    # how late references reached the controller (each run's trajectory time starts
+    # from the newest measurement's reception: taken from a backlog, 4 of 10 starts were
+    # 58–116 ms late, and a move start seen that late kicked the axis past its
+    # acceleration limit — most of this test's skips)
+    late = _late_references(out / 'logs')
+    assert late, 'controller_node did not log its late references'
     # autotune's own trip ("…: speed limit …") or a node's, passed on ("…: controller_node
     # exited with status 3: … speed limit: …", seen with the suite's load on the cores)
     trip = re.search(r"autotune stopped in stage '([^']+)': (?:[^\n]*?)(\w+ limit)", stderr)
@@ -91,8 +110,10 @@ def test_autotune_drives_an_external_plant(tmp_path, autotune, bare_model, domai
         assert stderr.count('motor-comp: error:') == 1 and 'Traceback' not in stderr
         assert (out / 'autotune.json').exists() or list(out.glob('*.mcap'))
         pytest.skip(f'the realtime loop tripped the {trip[2]} in {trip[1]!r}: the stop '
-                    'was checked, not the compensation')
+                    f'was checked, not the compensation (references at most '
+                    f'{1e3 * max(late):.1f} ms late)')
     assert code == 0, stderr
+    assert max(late) < 0.05, late
     data = json.loads(stdout)
     assert data['external_plant'] and data['plant'] is None and data['mode'] == 'realtime'
     assert [s['name'] for s in data['steps']] == ['design', 'excite', 'fit', 'task none',
