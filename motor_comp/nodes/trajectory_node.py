@@ -174,6 +174,10 @@ class TrajectoryNode(ParamNode):
         # exit_at_end: the last grid point published before the node is done
         self._end_k = self._last_k if self.p['exit_at_end'] else None
         self._finished = False
+        # realtime: ticks that found grid points already due (this process was late), and
+        # the longest such delay [periods]
+        self.late_ticks = 0
+        self.late_max = 0
         if self.timing is Timing.LOCKSTEP:
             self.batch_pause = self.p['batch_period']
         self._msg = JointState(name=[JOINT_NAME], position=array.array('d', [0.0]),
@@ -357,6 +361,9 @@ class TrajectoryNode(ParamNode):
         # CATCH_UP of them): a plant that slipped needs them, and a recording then holds
         # the reference of every sample instead of holding an older one over the gap
         last = k_now + 1 if self._end_k is None else min(k_now + 1, self._end_k)
+        if self._next_k >= 0 and k_now - self._next_k >= 1:
+            self.late_ticks += 1
+            self.late_max = max(self.late_max, k_now - self._next_k + 1)
         for k in range(max(self._next_k, k_now - CATCH_UP), last + 1):
             self.publish_at(k * (1.0 / self.p['control_rate']), self._t0_ns + k * self.dt_ns)
         self._next_k = max(self._next_k, last + 1)
@@ -365,6 +372,10 @@ class TrajectoryNode(ParamNode):
 
     def finish(self, executor: Any) -> None:
         """Give the readers the chance to acknowledge the last references (at most 2 s)."""
+        if self.timing is Timing.REALTIME:
+            self.get_logger().info(f'timing: {self.late_ticks} ticks found references already '
+                                   f'due, the latest {self.late_max * self.dt_ns * 1e-6:.1f} '
+                                   f'ms late')
         if executor is not None:
             self.pub.wait_for_all_acked(Duration(seconds=2.0))
 
