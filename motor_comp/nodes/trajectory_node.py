@@ -20,10 +20,10 @@ from the plant and the controller.  A parameter change therefore reaches the loo
 Realtime: a wall-clock timer at ``control_rate``; trajectory time starts when the plant's
 first measurement (stamped t0; the newest queued) arrives, at its reception time ``now₀``
 on this node's clock (the start point r(0), stamped with the wall clock, is held until
-then).  From then on each tick publishes
-the reference of the plant's sample grid ``t0 + k·T`` one period ahead (every grid point
-not yet published up to ``⌊(now − now₀)/T⌋ + 1``, at most ``CATCH_UP`` missed ones after a
-stall), stamped with its grid time, so the controller finds the reference of exactly
+then).  From then on each tick publishes the reference of the plant's sample grid
+``t0 + k·T`` one period ahead (every grid point not yet published up to
+``⌊(now − now₀)/T⌋ + 1``, at most ``CATCH_UP`` missed ones after a stall, counted and
+logged at the end), stamped with its grid time, so the controller finds the reference of exactly
 its measurement's stamp and a recording aligns reference and measurement without a hold
 error (ṙ·T ≈ 150 µm at 0.15 m/s when they are stamped at unrelated instants).  The
 plant's stamps may run on another clock than this node's (a drive on another machine, a
