@@ -425,6 +425,11 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
     part_in = float(getattr(floor, 'input_nrmse', 0.0))
     of_it = (f' (the logged input\'s own noise, σ ≈ {sig:.3g} {units.force} as a force, '
              f'accounts for {100 * part_in:.2f} %)' if part_in > 0 else '')
+    # the floor is what the model leaves on its own run (the twin): far above what it
+    # leaves, held out, on this one, it overstates what this measurement leaves
+    over = (f'; the noise floor, measured on the model\'s own run, is {fnr / nrmse:.1f}× '
+            'what the model leaves on this one: it overstates what this measurement leaves'
+            if math.isfinite(fnr) and fnr > NEAR_FLOOR * nrmse else '')
     if complete:
         summary = (f'complete as far as this run shows: force NRMSE {100 * nrmse:.2f} % at the '
                    f'noise floor {100 * fnr:.2f} %{of_it}, and no structure left in the '
@@ -438,7 +443,7 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
                    f'{of_it}: more is left than the measurement explains, but no structure '
                    'against position, velocity, load, time, reversals or frequency stands out')
     return Unexplained(force_nrmse=nrmse, noise_floor_nrmse=fnr, features=tuple(feats),
-                       complete=complete, summary=summary, scans=tuple(profiles),
+                       complete=complete, summary=summary + over, scans=tuple(profiles),
                        input_noise_force=sig, input_noise_nrmse=part_in)
 
 

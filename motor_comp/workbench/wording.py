@@ -26,6 +26,9 @@ TITLES = {**{n: cls.title or n for n, cls in EFFECTS.items()},
           MASS: 'mass/inertia mismatch', REFIT: 'wrong model parameters'}
 
 #: the experiment that separates two effects a run cannot tell apart (§6)
+#: the experiment that tells load-dependent friction from the laws it equals otherwise
+BRAKE = ('decelerate faster than friction alone would, so that the drive brakes (pushes '
+         'against the motion) for a good share of the run, at several speeds')
 SEPARATE = {
     frozenset(('offset', 'asymmetry')): 'move both directions at equal speeds and hold '
                                         'still between moves',
@@ -43,9 +46,12 @@ SEPARATE = {
     frozenset(('ripple', 'spring')): 'move over at least two ripple periods',
     frozenset(('ripple', 'offset')): 'move over at least two ripple periods',
     frozenset(('ripple', 'gravity')): 'move over a whole revolution',
-    frozenset(('coulomb', 'load_friction')): 'move at one speed under clearly different '
-                                             'loads (accelerations, an added weight)',
     frozenset(('coulomb', 'position_friction')): 'move over the whole travel at one speed',
+    # while the drive pushes along the motion, |F_in| = (M·a + fc + fv·|v|)/(1 − mu):
+    # load friction is then a larger mass, Coulomb and viscous level; braking tells
+    frozenset(('coulomb', 'load_friction')): BRAKE,
+    frozenset(('viscous', 'load_friction')): BRAKE,
+    frozenset(('mass', 'load_friction')): BRAKE,
     frozenset(('viscous', 'time')): 'interleave the speeds instead of raising them over time',
 }
 
@@ -289,8 +295,8 @@ def experiment_notes(summary: Any, units: Units) -> list[str]:
     return notes
 
 
-__all__ = ['LINEAR_UNITS', 'MASS', 'ParameterChange', 'REFIT', 'ROTARY_UNITS', 'SEPARATE',
-           'TITLES', 'axis_units', 'common_scale', 'directions', 'experiment_notes',
+__all__ = ['BRAKE', 'LINEAR_UNITS', 'MASS', 'ParameterChange', 'REFIT', 'ROTARY_UNITS',
+           'SEPARATE', 'TITLES', 'axis_units', 'common_scale', 'directions', 'experiment_notes',
            'fmt_param', 'force_scaled', 'gain_note', 'identifiability_notes',
            'model_scalars', 'more_words', 'params_text', 'scale_forces',
            'significant_changes', 'unit_of', 'unresolved']

@@ -24,6 +24,8 @@ from typing import Any
 
 import pytest
 
+from motor_comp.workbench.wording import BRAKE
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from indgen_cases import COMPLETE_CASES, NEW_EFFECT_CASES, ORDINARY_PRESLIDING_CASES, \
@@ -88,7 +90,7 @@ def _job(job: tuple[str, int, int]) -> dict[str, Any]:
     return {'label': case.label, 'seed': seed, 'truth': gen.truth,
             'fitted': res.model.to_dict(), 'params': res.params,
             'features': [f.as_dict() for f in un.features],
-            'nrmse': un.force_nrmse, 'floor': un.noise_floor_nrmse,
+            'nrmse': un.force_nrmse, 'floor': un.noise_floor_nrmse, 'summary': un.summary,
             'input_noise_force': un.input_noise_force, 'input_nrmse': un.input_noise_nrmse,
             'noise': gen.noise.as_dict(), 'input': case.input,
             'truth_nrmse': truth_nrmse, 'identifiability': list(res.identifiability),
@@ -181,9 +183,10 @@ def test_load_and_position_friction_from_a_bare_model():
         if o['label'] in NEW_EFFECT_MISSES:
             assert not ok, f'{o["label"]} is found now: remove it from NEW_EFFECT_MISSES'
             if 'load_friction' in o['truth']['effects']:
-                # a miss must be said: the ambiguity that hides mu is named
-                assert any('load_friction' in s for s in o['identifiability']), \
-                    (o['label'], o['identifiability'])
+                # a miss must be said: the ambiguity that hides mu is named, with the
+                # experiment that shows it (the drive braking)
+                assert any('load_friction' in s and BRAKE in s
+                           for s in o['identifiability']), (o['label'], o['identifiability'])
         else:
             assert ok, why
 
@@ -197,6 +200,27 @@ def test_presliding_is_found_on_ordinary_runs_and_only_where_it_is():
     assert len(found) >= PRESLIDING_SHARE * len(with_gms), \
         [o['label'] for o in with_gms if o not in found]
     assert not false, false
+    # found without a stand-in: nothing but the planted effects, at the true model's
+    # NRMSE.  Before the final model's terms were pruned against H0 without them, a
+    # dead time that joined to mend an early pre-sliding curve stayed (1 kHz sine: 5.6 ms,
+    # the mass -63 %, 0.46 % force NRMSE where the true model leaves 0.04 %): 4 of these 6
+    # runs, now 5
+    exact = [o['label'] for o in with_gms if set(o['fitted']['effects'])
+             == set(o['truth']['effects']) and o['nrmse'] <= 1.5 * o['truth_nrmse']]
+    assert len(exact) >= len(with_gms) - 1, \
+        [(o['label'], sorted(o['fitted']['effects']), o['nrmse'], o['truth_nrmse'])
+         for o in with_gms if o['label'] not in exact]
+
+
+def test_a_floor_above_what_the_model_leaves_is_said_to_overstate(complete):
+    # the floor is the model's NRMSE on its own run; where the generator's turns leave
+    # more than our kernel's twin does, the floor can lie far above a complete model's
+    # held-out NRMSE (5.5x on a backlash sweep): the summary says so, with the ratio
+    high = [o for o in complete if o['floor'] > NEAR_FLOOR * o['nrmse']]
+    assert high, 'no run with a floor far above its fit: this test checks nothing'
+    for o in complete:
+        said = 'overstates what this measurement leaves' in o['summary']
+        assert said == (o in high), (o['label'], o['floor'], o['nrmse'], o['summary'])
 
 
 def test_the_noise_floor_is_measured_not_assumed(complete):
