@@ -121,8 +121,10 @@ def without(eng: Engine, est: Estimate, name: str) -> Estimate:
     """Return ``est``'s model without ``name``: H0 of the smaller model.
 
     Fitted on the rows the smaller model is judged on; every other term's nonlinear
-    parameters are searched again, vector ones (the structure of a pre-sliding curve)
-    too, kept where the held-out error does not rise.
+    parameters are searched again from where they are (one term less moves them, it
+    does not send them to another basin: the grid is not scored again), vector ones
+    (the structure of a pre-sliding curve) too, kept where the held-out error does not
+    rise.
     """
     spec = est.spec.without(name)
     D = eng.data_for(spec)
@@ -132,7 +134,7 @@ def without(eng: Engine, est: Estimate, name: str) -> Estimate:
         if not searched(t):
             continue
         eta = refine_structure(D, e.spec, n, e.model) if vector(t, D) else \
-            search(D, e.spec, n, e.model)
+            search(D, e.spec, n, e.model, local=True)
         if eta != e.spec.of(n):
             new = estimate(D, e.spec.with_(n, eta), e.model)
             if new.sse_cv <= e.sse_cv:

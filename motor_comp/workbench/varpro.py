@@ -155,14 +155,17 @@ class Search:
         return t.initial is not Term.initial or t.derive is not Term.derive
 
     def run(self, eta0: Mapping, *, stop_above: float = math.inf,
-            refine: bool = True) -> dict:
+            refine: bool = True, local: bool = False) -> dict:
         """Return the best nonlinear parameters found (see the module docstring).
 
         When even the best start is above ``stop_above`` (a screened candidate that
         cannot pay), it is returned without the local search; ``refine=False`` leaves
-        out the growth and polish of vector parameters.
+        out the growth and polish of vector parameters; ``local=True`` starts from
+        ``eta0`` alone when it holds every parameter (a term's optimum in a model that
+        changed a little), not from the grid.
         """
-        trials = self.starts(eta0)
+        warm = bool(self.space) and all(p in eta0 for p in self.space)
+        trials = [dict(eta0)] if local and warm else self.starts(eta0)
         costs = [self.cost(e) for e in trials]
         i = int(np.argmin(costs))
         eta = trials[i]
@@ -380,10 +383,11 @@ def _freeze(eta: Mapping) -> tuple:
 
 def search(data: Dataset, spec: Spec, name: str, model: AxisModel | None,
            rows: np.ndarray | None = None, *, stop_above: float = math.inf,
-           refine: bool = True, weights: SpeedWeights | None = None) -> dict:
+           refine: bool = True, weights: SpeedWeights | None = None,
+           local: bool = False) -> dict:
     """Return the nonlinear parameters of ``name`` in ``spec`` fitted on ``rows``."""
     s = Search(data, spec, name, model, rows, weights)
-    return s.run(spec.of(name), stop_above=stop_above, refine=refine)
+    return s.run(spec.of(name), stop_above=stop_above, refine=refine, local=local)
 
 
 def refine_structure(data: Dataset, spec: Spec, name: str, model: AxisModel | None,
