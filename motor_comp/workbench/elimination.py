@@ -154,6 +154,24 @@ def _floor(eng: Engine, models: tuple, D: Dataset, sse0: float) -> float:
     return min(fs, default=0.0)
 
 
+def _pays(eng: Engine, est: Estimate, e: Estimate, sse0: float, dp: int, D: Dataset) \
+        -> tuple[bool, float, float]:
+    """Return :meth:`~.selection.Engine.pays` of ``e`` → ``est`` with :func:`_floor`.
+
+    The smaller model's floor (an anchored simulation) is not run when the full model's
+    decides: a term that pays with the full model's floor by a fall of ``min_drop`` or
+    more pays with any lower floor too (the fall only grows, and the bar is never above
+    ``min_drop``).
+    """
+    full = eng.floor_sse(est, D)
+    if 0.0 < full < sse0:
+        ok, explained, b = eng.pays(sse0, est.sse_cv, dp, D, floor=full)
+        fall = eng.nrmse(sse0, D) - max(eng.nrmse(est.sse_cv, D), eng.nrmse(full, D))
+        if ok and fall >= eng.min_drop:
+            return ok, explained, b
+    return eng.pays(sse0, est.sse_cv, dp, D, floor=lambda: _floor(eng, (e, est), D, sse0))
+
+
 def prune(eng: Engine, est: Estimate, step: Step) -> Estimate:
     """Backward elimination of the final model, each removal judged against H0 without it.
 
@@ -175,8 +193,7 @@ def prune(eng: Engine, est: Estimate, step: Step) -> Estimate:
             sse0 = e.sse_cv if eng.data_for(e.spec) is D else \
                 cv_design(D, e.spec, e.model)[0]
             dp = n_params(est.spec) - n_params(e.spec)
-            ok, explained, _ = eng.pays(sse0, est.sse_cv, dp, D,
-                                        floor=lambda e=e, s=sse0: _floor(eng, (e, est), D, s))
+            ok, explained, _ = _pays(eng, est, e, sse0, dp, D)
             if not ok and (worst is None or explained < worst[0]):
                 worst = (explained, n, e)
         if worst is None:
