@@ -9,8 +9,8 @@ same rule (:meth:`.selection.Engine.pays`) and, like it, never by an effect's na
   parameters are within two standard errors of zero.
 * :func:`prune`, once on the final model: each removal judged against H0 of the smaller
   model (:func:`without`: every other term's nonlinear parameters and structures searched
-  again), as the forward step that would add the term back to it (the smaller model's
-  floor).
+  again), as the forward step that would add the term back to it, against the lower of
+  the two models' noise floors.
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ import numpy as np
 
 from motor_comp.physics.effects import TERMS
 from motor_comp.workbench.dataset import Dataset
-from motor_comp.workbench.library import ORDER, Spec, context, n_params
+from motor_comp.workbench.library import ORDER, Spec, context, n_params, owned_columns
 from motor_comp.workbench.result import Estimate, estimate
 from motor_comp.workbench.varpro import cv_design, refine_structure, search, searched
 
@@ -58,7 +58,6 @@ def nested(spec: Spec, name: str) -> list[str]:
 
 def _extra_flat(est: Estimate, name: str, sub: str) -> bool:
     """Whether ``name``'s parameters beyond those ``sub`` keeps are within 2 SE of zero."""
-    from motor_comp.workbench.library import owned_columns
     spec = est.spec
     owned = {(n, c.label) for n, c in owned_columns(spec, context(spec))}
     flat = True

@@ -429,7 +429,7 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
     # leaves, held out, on this one, it overstates what this measurement leaves
     over = (f'; the noise floor, measured on the model\'s own run, is {fnr / nrmse:.1f}× '
             'what the model leaves on this one: it overstates what this measurement leaves'
-            if math.isfinite(fnr) and fnr > NEAR_FLOOR * nrmse else '')
+            if nrmse > 0 and math.isfinite(fnr) and fnr > NEAR_FLOOR * nrmse else '')
     if complete:
         summary = (f'complete as far as this run shows: force NRMSE {100 * nrmse:.2f} % at the '
                    f'noise floor {100 * fnr:.2f} %{of_it}, and no structure left in the '

@@ -132,7 +132,7 @@ class Search:
         A start that already holds every parameter (the term's optimum in the previous
         round of a selection) joins the grid as one more trial.
         """
-        warm = [dict(eta0)] if self.space and all(p in eta0 for p in self.space) else []
+        warm = [dict(eta0)] if self.holds_all(eta0) else []
         vals, r, x = self.base_fit() if self._needs_base() else ({}, None, None)
         eta0 = self.term.derive(eta0, vals) if vals else dict(eta0)
         if r is not None:
@@ -150,6 +150,10 @@ class Search:
             out.append(e)
         return out
 
+    def holds_all(self, eta: Mapping) -> bool:
+        """Whether ``eta`` gives every searched parameter (a start of its own)."""
+        return bool(self.space) and all(p in eta for p in self.space)
+
     def _needs_base(self) -> bool:
         t = type(self.term)
         return t.initial is not Term.initial or t.derive is not Term.derive
@@ -164,8 +168,7 @@ class Search:
         ``eta0`` alone when it holds every parameter (a term's optimum in a model that
         changed a little), not from the grid.
         """
-        warm = bool(self.space) and all(p in eta0 for p in self.space)
-        trials = [dict(eta0)] if local and warm else self.starts(eta0)
+        trials = [dict(eta0)] if local and self.holds_all(eta0) else self.starts(eta0)
         costs = [self.cost(e) for e in trials]
         i = int(np.argmin(costs))
         eta = trials[i]
