@@ -153,8 +153,8 @@ def _floor(eng: Engine, models: tuple, D: Dataset, sse0: float) -> float:
     return min(fs, default=0.0)
 
 
-def _pays(eng: Engine, est: Estimate, e: Estimate, sse0: float, dp: int, D: Dataset) \
-        -> tuple[bool, float, float]:
+def _pays(eng: Engine, est: Estimate, e: Estimate, sse0: float, dp: int, D: Dataset,
+          name: str) -> tuple[bool, float, float]:
     """Return :meth:`~.selection.Engine.pays` of ``e`` → ``est`` with :func:`_floor`.
 
     The smaller model's floor (an anchored simulation) is not run when the full model's
@@ -168,7 +168,9 @@ def _pays(eng: Engine, est: Estimate, e: Estimate, sse0: float, dp: int, D: Data
         fall = eng.nrmse(sse0, D) - max(eng.nrmse(est.sse_cv, D), eng.nrmse(full, D))
         if ok and fall >= eng.min_drop:
             return ok, explained, b
-    return eng.pays(sse0, est.sse_cv, dp, D, floor=lambda: _floor(eng, (e, est), D, sse0))
+    null = (lambda: eng.placebo(e, D, name)) if D is eng.data else None
+    return eng.pays(sse0, est.sse_cv, dp, D, floor=lambda: _floor(eng, (e, est), D, sse0),
+                    placebo=null)
 
 
 def prune(eng: Engine, est: Estimate, step: Step) -> Estimate:
@@ -192,7 +194,7 @@ def prune(eng: Engine, est: Estimate, step: Step) -> Estimate:
             sse0 = e.sse_cv if eng.data_for(e.spec) is D else \
                 cv_design(D, e.spec, e.model)[0]
             dp = n_params(est.spec) - n_params(e.spec)
-            ok, explained, _ = _pays(eng, est, e, sse0, dp, D)
+            ok, explained, _ = _pays(eng, est, e, sse0, dp, D, n)
             if not ok and (worst is None or explained < worst[0]):
                 worst = (explained, n, e)
         if worst is None:

@@ -51,8 +51,8 @@ from typing import Sequence
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from indgen_cases import ABS_TOLERANCE, ABS_TOLERANCE_ROTARY, ALONE, Case, CASE_LISTS, \
-    CASES, COMBOS, COMPLETE_CASES, feature_matches, main_params, MASS_TOLERANCE, \
-    matching_feature, NEW_EFFECT_CASES, NEW_TOLERANCE, ORDINARY_PRESLIDING_CASES, \
+    CASES, COMBOS, COMPLETE_CASES, feature_matches, LOAD_FRICTION_SWEEP, main_params, \
+    MASS_TOLERANCE, matching_feature, NEW_EFFECT_CASES, NEW_TOLERANCE, ORDINARY_PRESLIDING_CASES, \
     OUT_OF_LIBRARY_CASES, parameter_errors, TOLERANCE, WRONG  # noqa: E402
 from indgen_excitation import chirp_reference, interleaved_reference, sine_reference, \
     sweep_reference, williams_orders  # noqa: E402
@@ -65,12 +65,12 @@ from indgen_rig import draw_case, draw_effect, draw_extra, draw_rig, draw_scenar
 __all__ = [
     'ABS_TOLERANCE', 'ABS_TOLERANCE_ROTARY', 'ALONE', 'CASES', 'CASE_LISTS', 'COMBOS',
     'COMPLETE_CASES', 'Case', 'DRY_EXTRAS', 'EFFECT_NAMES', 'EXCITATIONS', 'EXTRA_NAMES',
-    'GMS_SHAPES', 'Generated', 'MASS_TOLERANCE', 'NEW_EFFECT_CASES', 'NEW_TOLERANCE',
-    'NoiseTruth', 'ORDINARY_PRESLIDING_CASES', 'OUT_OF_LIBRARY_CASES', 'Planted', 'REQUIRES',
-    'Rig', 'TOLERANCE', 'WRONG', 'chirp_reference', 'draw_case', 'draw_effect', 'draw_extra',
-    'draw_rig', 'draw_scenario', 'drift_mean', 'feature_matches', 'generate', 'hermite',
-    'interleaved_reference', 'main', 'main_params', 'matching_feature', 'parameter_errors',
-    'position_friction_peak', 'reference', 'sine_reference', 'start_model',
+    'GMS_SHAPES', 'Generated', 'LOAD_FRICTION_SWEEP', 'MASS_TOLERANCE', 'NEW_EFFECT_CASES',
+    'NEW_TOLERANCE', 'NoiseTruth', 'ORDINARY_PRESLIDING_CASES', 'OUT_OF_LIBRARY_CASES',
+    'Planted', 'REQUIRES', 'Rig', 'TOLERANCE', 'WRONG', 'chirp_reference', 'draw_case',
+    'draw_effect', 'draw_extra', 'draw_rig', 'draw_scenario', 'drift_mean', 'feature_matches',
+    'generate', 'hermite', 'interleaved_reference', 'main', 'main_params', 'matching_feature',
+    'parameter_errors', 'position_friction_peak', 'reference', 'sine_reference', 'start_model',
     'sweep_reference', 'true_model', 'williams_orders', 'write']
 
 

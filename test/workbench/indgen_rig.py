@@ -601,10 +601,23 @@ def write(gen: Generated, directory: str, *, start: Mapping[str, Any] | None = N
                                         encoding='utf-8')
 
 
+def chirp_end(rig: Rig) -> float:
+    """Return the chirp's end frequency [Hz]: 3 Hz, or where its peak acceleration is the rig's.
+
+    At the top speed ``v`` the chirp's acceleration amplitude is ``2π·f·v``; a rig whose
+    acceleration was raised (an experiment that loads the drive, ``Case.accel``) is
+    driven up to ``f = accel/(2π·v)``, where the inertia force dwarfs the friction and
+    the drive brakes for about half of every cycle.  Every rig at its drawn
+    acceleration stays at 3 Hz (linear 1.6 Hz, rotary 1.1 Hz by that formula).
+    """
+    return max(3.0, rig.accel / (2 * np.pi * rig.speeds[-1]))
+
+
 def reference(excitation: str, rig: Rig, *, dt: float, duration: float, seed: int) \
         -> tuple[np.ndarray, dict[str, Any]]:
     """Build the reference ``(n, 3)`` of ``excitation`` on ``rig`` and its description.
 
+    ``chirp``: 0.2 Hz to :func:`chirp_end`, the amplitude limited to the top sweep speed.
     ``sine``: frequency 0.5–2 Hz and a peak speed 25–60 % of the rig's top sweep speed
     (amplitude at most 40 % of the travel), drawn from ``seed`` on a stream of its own
     (the run's noise draws are not shifted).
@@ -618,9 +631,10 @@ def reference(excitation: str, rig: Rig, *, dt: float, duration: float, seed: in
                                      dt=dt, duration=duration), \
             {'excitation': 'interleaved', 'speeds': list(rig.speeds)}
     if excitation == 'chirp':
-        return chirp_reference(f0=0.2, f1=3.0, amplitude=0.45 * rig.travel,
+        f1 = chirp_end(rig)
+        return chirp_reference(f0=0.2, f1=f1, amplitude=0.45 * rig.travel,
                                vmax=rig.speeds[-1], dt=dt, duration=duration), \
-            {'excitation': 'chirp', 'f0': 0.2, 'f1': 3.0}
+            {'excitation': 'chirp', 'f0': 0.2, 'f1': f1}
     if excitation == 'sine':
         srng = np.random.default_rng([seed, 51])
         f = float(srng.uniform(0.5, 2.0))

@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from independent_generator import Case, CASE_LISTS, COMPLETE_CASES, draw_case, \
     draw_scenario, drift_mean, EXTRA_NAMES, feature_matches, generate, hermite, main, \
-    matching_feature, NEW_EFFECT_CASES, ORDINARY_PRESLIDING_CASES, \
+    LOAD_FRICTION_SWEEP, matching_feature, NEW_EFFECT_CASES, ORDINARY_PRESLIDING_CASES, \
     OUT_OF_LIBRARY_CASES, parameter_errors, Planted, position_friction_peak, \
     williams_orders  # noqa: E402
 import indgen_laws  # noqa: E402
@@ -124,13 +124,16 @@ def test_case_lists_carry_their_truth():
         assert {c.axis for c in mine} == {'linear', 'rotary'}
         assert any(c.names == (effect,) for c in mine)                    # alone
         assert any('ripple' in c.names for c in mine)
-    # load friction is identifiable only where the drive brakes: every case has such
-    # strokes on every axis drawn (the mass- and friction-scaling is broken there)
+    # load friction is identifiable only where the drive brakes: every case brakes for
+    # a good share of the run on every axis drawn (20–43 % of the moving samples at
+    # seeds 1–3; the mass- and friction-scaling is broken there), the control sweep
+    # only in its short decelerations (1.2–1.4 %)
     for case in NEW_EFFECT_CASES:
         if 'load_friction' in case.names:
             for seed in (1, 2, 3):
-                assert case.make(seed, duration=DURATION).meta['braking_share'] > 0.005, \
+                assert case.make(seed, duration=DURATION).meta['braking_share'] > 0.15, \
                     (case.label, seed)
+    assert LOAD_FRICTION_SWEEP.make(1, duration=DURATION).meta['braking_share'] < 0.05
     half = len(ORDINARY_PRESLIDING_CASES) // 2
     assert all('presliding' in c.names and not c.without
                for c in ORDINARY_PRESLIDING_CASES[:half])
