@@ -168,9 +168,8 @@ def _pays(eng: Engine, est: Estimate, e: Estimate, sse0: float, dp: int, D: Data
         fall = eng.nrmse(sse0, D) - max(eng.nrmse(est.sse_cv, D), eng.nrmse(full, D))
         if ok and fall >= eng.min_drop:
             return ok, explained, b
-    null = (lambda: eng.placebo(e, D, name)) if D is eng.data else None
     return eng.pays(sse0, est.sse_cv, dp, D, floor=lambda: _floor(eng, (e, est), D, sse0),
-                    placebo=null)
+                    placebo=eng.refuter(e, D, name))
 
 
 def prune(eng: Engine, est: Estimate, step: Step) -> Estimate:

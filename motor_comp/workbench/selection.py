@@ -289,9 +289,7 @@ class Engine:
         dp = n_params(spec) - n_params(base.spec)
         # the noise floor (a simulation of the run) only when the rule needs it
         floor = lambda: self.floor_sse(base, D)  # noqa: E731
-        # the run refutes a floor only where the floor's twin replicates it: not on
-        # the rows that reach the stops (the turns, where integrators differ most)
-        null = (lambda: self.placebo(base, D, name)) if D is self.data else None
+        null = self.refuter(base, D, name)
         ok, explained, b = self.pays(sse0, sse, dp, D, floor=floor, placebo=null)
         why_not = est.inadmissible.get(name, '')
         if not ok and not why_not and explained >= self.min_gain and any(
@@ -312,9 +310,9 @@ class Engine:
             # the turns is most of the floor: it must explain more of the run than of the
             # model's own twin, measured the same way (what it explains there is the
             # processing's, not the axis's)
-            null = self.placebo(base, D, name)
-            if explained - null < self.min_gain:
-                why_not = (f'it explains {100 * null:.0f} % of a run of the model without '
+            twin = self.placebo(base, D, name)
+            if explained - twin < self.min_gain:
+                why_not = (f'it explains {100 * twin:.0f} % of a run of the model without '
                            f'it, processed the same way, against {100 * explained:.0f} % of '
                            'this run: what it finds at the turns is the processing\'s')
         if why_not:
@@ -330,6 +328,15 @@ class Engine:
             units=self.units, correlations=tuple(est.correlations), spec=est.spec,
             at_bound=bool(est.at_bound.get(name)), why_not=why_not,
             estimate=est)
+
+    def refuter(self, base: Estimate, D: Dataset, name: str) -> Callable[[], float] | None:
+        """Return the placebo :meth:`pays` may refute the floor with, or None.
+
+        The run refutes a floor only where the floor's twin replicates it: on the
+        model's sliding rows, not on the rows that reach the stops (the turns, where
+        integrators differ most).
+        """
+        return (lambda: self.placebo(base, D, name)) if D is self.data else None
 
     def placebo(self, base: Estimate, D: Dataset, name: str) -> float:
         """Return the held-out share ``name`` explains of ``base``'s own twin on ``D``'s rows.
