@@ -21,7 +21,7 @@ import dataclasses
 import hashlib
 import json
 import math
-from typing import Any, Callable, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -30,114 +30,15 @@ from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import EffectKind
 from motor_comp.physics.effects.identification import Column, Signal, Summary
 from motor_comp.workbench import processing as proc
-from motor_comp.workbench.derivatives import InputHold, Kinematics
+from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.motion import motor_position
-from motor_comp.workbench.turns import REVERSAL_HALF, reversal_shares
+from motor_comp.workbench.parts import Motion, PathView, RunPart
 
 #: least share of the sliding samples in the minority direction for the runs to count as
 #: moving both ways: below it the backward samples are jitter of a one-way run
 MIN_DIRECTION_SHARE = 0.05
 #: memory for cached smoothed columns of one dataset [bytes]
 COLUMN_CACHE_BYTES = 256 * 2**20
-
-
-@dataclasses.dataclass(frozen=True)
-class RunPart:
-    """One processed run: its kinematics, fitted rows and smoother length."""
-
-    kin: Kinematics
-    rows: np.ndarray
-    W: int
-    gms_scale: float = 1.0
-
-
-class Motion:
-    """The pointwise signals of one run along one motor motion (lazily computed once)."""
-
-    def __init__(self, part: RunPart, position: np.ndarray, measured: bool) -> None:
-        self.part = part
-        self.position = position
-        self._measured = measured
-        self._cache: dict[str, Any] = {}
-
-    def _get(self, name: str) -> Any:
-        hit = self._cache.get(name)
-        if hit is None:
-            kin = self.part.kin
-            if name == 'x':
-                hit = kin.x if self._measured else proc.point_position(kin, self.position)
-            elif name == 'v':
-                hit = proc.point_velocity(kin, self.position)
-            elif name == 'xg':
-                hit = proc.gms_position(kin, self.position, self.part.gms_scale)
-            elif name == 'xs':
-                hit = proc.smooth_full(self.position, self.part.W)
-            elif name == 'shares':
-                half = max(3, int(round(REVERSAL_HALF * kin.window)))
-                eps = max(kin.quantum(), kin.noise_std())
-                fwd, bwd, stuck = reversal_shares(
-                    np.asarray(self.position, dtype=float), self._get('v'), half, eps,
-                    spread=kin.hold is not InputHold.SAMPLE)
-                # an axis at rest (outside a fitted turn): its friction balances every
-                # other force, whatever the sign of its dither
-                rest = proc.rest_runs(proc.held_ends(kin, proc.sliding_mask(
-                    kin, None if self._measured else self.position)))
-                rest &= (stuck == 0.0) & ((fwd == 0.0) | (fwd == 1.0)) & \
-                    ((bwd == 0.0) | (bwd == 1.0))
-                fwd, bwd = np.where(rest, 0.0, fwd), np.where(rest, 0.0, bwd)
-                hit = (fwd, bwd, stuck, rest.astype(float))
-            self._cache[name] = hit
-        return hit
-
-    @property
-    def x(self) -> np.ndarray:
-        """Pointwise position [m or rad]."""
-        return self._get('x')
-
-    @property
-    def v(self) -> np.ndarray:
-        """Pointwise velocity [m/s or rad/s]."""
-        return self._get('v')
-
-    @property
-    def xg(self) -> np.ndarray:
-        """Position the GMS elements are driven by."""
-        return self._get('xg')
-
-    smoothed = property(lambda self: self._get('xs'))   # S·position: both stencils' input
-
-    @property
-    def shares(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Forward, backward, stuck (at a turn) and at-rest shares of each sample."""
-        return self._get('shares')
-
-
-class PathView:
-    """A run's signals as a term's columns see them (:class:`~…identification.Path`)."""
-
-    def __init__(self, motion: Motion, f_in: Any, direction: int) -> None:
-        self._m = motion
-        self._f_in = f_in
-        self.position = motion.position
-        self.dt = motion.part.kin.dt
-        self.direction = direction
-
-    x = property(lambda self: self._m.x)
-    v = property(lambda self: self._m.v)
-    xg = property(lambda self: self._m.xg)
-    fwd = property(lambda self: self._m.shares[0])
-    bwd = property(lambda self: self._m.shares[1])
-    stuck = property(lambda self: self._m.shares[2])
-    rest = property(lambda self: self._m.shares[3])
-    f_in = property(lambda self: self._f_in(self._m))
-
-    def memo(self, key: tuple, make: Callable[[], Any]) -> Any:
-        """Return ``make()`` computed once per motion and ``key`` (shared derived signals)."""
-        cache = self._m._cache
-        k = ('memo',) + tuple(key)
-        if k not in cache:
-            cache[k] = make()
-        return cache[k]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -499,14 +400,23 @@ class View:
             np.concatenate([proc.stencil(mo.smoothed, p.rows, p.kin.dt, which)
                             for p, mo in zip(self.data.parts, self.motions)])))
 
-    def smooth(self, fn: Any, key: tuple, *, uses_input: bool = False,
-               weigh: bool = True) -> np.ndarray:
-        """Return ``S(fn(part, motion))`` at the rows, cached under ``key``."""
+    def smooth_input(self, factor: Any, key: tuple) -> np.ndarray:
+        """Return ``S(factor(part, motion)·u(t − τ))`` at the rows (unweighted), cached.
+
+        ``S`` is linear and time-invariant and the delayed input a weighted sum of
+        whole-sample shifts (:meth:`Kinematics.input_lags`): each shift is smoothed once
+        and cached, and a trial delay sums two or three of them (a delay search smoothed
+        the whole input at each of its ~80 trials).
+        """
         def make() -> np.ndarray:
-            out = np.concatenate([proc.smooth_at(fn(p, mo), p.rows, p.W)
-                                  for p, mo in zip(self.data.parts, self.motions)])
-            return self._weigh(out) if weigh else out
-        return self.data.cached(self.key(key + (weigh,), uses_input=uses_input), make)
+            out = []
+            for i, (p, mo) in enumerate(zip(self.data.parts, self.motions)):
+                def lag(s: int) -> np.ndarray:
+                    return self.data.cached(self.key(key + ('lag', i, s)), lambda: proc.smooth_at(
+                        factor(p, mo) * p.kin.input_shifted(s), p.rows, p.W))
+                out.append(sum(w * lag(s) for s, w in p.kin.input_lags(self.tau)))
+            return np.concatenate(out)
+        return self.data.cached(self.key(key, uses_input=True), make)
 
     def ckey(self, col: Column, rests: bool) -> tuple:
         """Return the cache key of a term's column in this view."""
@@ -572,11 +482,9 @@ class View:
         k = m.input_gain * m.back_emf + m.damping
         g = m.input_gain
         if rests:
-            w = self.smooth(lambda p, mo: g * (1.0 - mo.shares[3]) * p.kin.input_at(self.tau),
-                            ('u', 'moving'), uses_input=True, weigh=False)
+            w = self.smooth_input(lambda p, mo: g * (1.0 - mo.shares[3]), ('u', 'moving'))
         else:
-            w = self.smooth(lambda p, mo: g * p.kin.input_at(self.tau), ('u',),
-                            uses_input=True, weigh=False)
+            w = self.smooth_input(lambda p, mo: g, ('u',))
         if not k:
             return w
         vl = self.data.at(width=self.width, tau=self.tau, model=self.model)\
@@ -586,8 +494,7 @@ class View:
     def stuck_force(self) -> np.ndarray:
         """Return the smoothed drive force of the samples stuck at a turn (unweighted)."""
         g = self.data.model.input_gain
-        return self.smooth(lambda p, mo: g * mo.shares[2] * p.kin.input_at(self.tau),
-                           ('stuck_u',), uses_input=True, weigh=False)
+        return self.smooth_input(lambda p, mo: g * mo.shares[2], ('stuck_u',))
 
     def nrmse(self, sse: float) -> float:
         """Return the force NRMSE of a sum of squared residuals over the rows."""

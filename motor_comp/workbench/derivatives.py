@@ -127,20 +127,34 @@ class Kinematics:
             hit.flags.writeable = False     # shared by every caller
         return hit
 
-    def _input_at(self, tau: float) -> np.ndarray:
-        t, u = self.t, self.u
-        if self.hold is InputHold.SAMPLE:
-            return np.interp(t - tau, t, u)
+    def input_lags(self, tau: float) -> tuple[tuple[int, float], ...]:
+        """Return ``(s, w)`` pairs with ``input_at(tau) = Σ w·u`` delayed by ``s`` samples.
+
+        The samples are evenly spaced (an irregular log is resampled), so a delay is a
+        whole-sample shift plus a fraction ``f`` of one: linear interpolation for a
+        sampled input, the triangle weights of :meth:`input_at` for a held one.  A
+        linear, time-invariant smoother of the delayed input is then the same weighted
+        sum of the smoothed shifts, which a delay search can reuse from trial to trial.
+        """
         q = float(tau) / self.dt
         n = int(np.floor(q))
         f = q - n
         if f > 1.0 - 1e-12:   # a whole sample, up to rounding
             n, f = n + 1, 0.0
+        if self.hold is InputHold.SAMPLE:
+            return ((n, 1.0 - f), (n + 1, f)) if f > 0.0 else ((n, 1.0),)
+        lags = ((n + 1, 1.0 - 0.5 * f * f - 0.5 * (1.0 - f) ** 2), (n, 0.5 * (1.0 - f) ** 2))
+        return lags + ((n + 2, 0.5 * f * f),) if f > 0.0 else lags
+
+    def input_shifted(self, s: int) -> np.ndarray:
+        """Return the input delayed by ``s`` whole samples (held at the record's ends)."""
+        return _shifted(self.u, s)
+
+    def _input_at(self, tau: float) -> np.ndarray:
         # before the first sample the command is held at u[0], after the last at u[-1]
-        out = (1.0 - 0.5 * f * f - 0.5 * (1.0 - f) ** 2) * _shifted(u, n + 1)
-        out += 0.5 * (1.0 - f) ** 2 * _shifted(u, n)
-        if f > 0.0:
-            out += 0.5 * f * f * _shifted(u, n + 2)
+        out = np.zeros(len(self.u))
+        for s, w in self.input_lags(tau):
+            out += w * _shifted(self.u, s)
         return out
 
     def quantum(self) -> float:

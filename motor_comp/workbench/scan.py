@@ -25,13 +25,12 @@ import math
 from typing import Any, Mapping
 
 import numpy as np
-from scipy.optimize import minimize_scalar
-from scipy.fft import next_fast_len
 
 from motor_comp.physics.axis import Units
 from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.library import Spec, design, given_residual, spec_of
 from motor_comp.workbench.lsq import solve_gram
+from motor_comp.workbench.optim import brent_bounded, next_fast_len
 from motor_comp.workbench.spectral import density, stretches
 
 #: least share of the residual's energy, beyond what the floor's record shows, that a
@@ -272,10 +271,8 @@ def _tone(data: Dataset, r: np.ndarray, t: np.ndarray) \
         return none
     j = int(band[np.argmax(power[band])])
     step_f = float(freqs[1] - freqs[0])
-    opt = minimize_scalar(lambda fr: -fit_at(fr)[0],
-                          bounds=(max(freqs[j] - 2 * step_f, 0.5 * step_f),
-                                  freqs[j] + 2 * step_f), method='bounded',
-                          options={'xatol': 1e-4 / span})
+    opt = brent_bounded(lambda fr: -fit_at(fr)[0], max(freqs[j] - 2 * step_f, 0.5 * step_f),
+                        freqs[j] + 2 * step_f, xatol=1e-4 / span)
     share, fit = fit_at(float(opt.x))
     return float(opt.x), 0.5 / span, share, fit
 

@@ -36,7 +36,6 @@ import math
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-from scipy.optimize import minimize, minimize_scalar
 
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import TERMS
@@ -44,6 +43,7 @@ from motor_comp.physics.effects.identification import MASS, Param, Term
 from motor_comp.workbench.dataset import Dataset, SpeedWeights
 from motor_comp.workbench.library import Spec, context, design, values_of
 from motor_comp.workbench.lsq import bic, cv_grams, solve_gram, sse_with
+from motor_comp.workbench.optim import Minimum, brent_bounded, nelder_mead
 
 
 def searched(t: Term) -> bool:
@@ -64,8 +64,8 @@ def _n_eff(data: Dataset, rows: np.ndarray | None) -> float:
     return max(data.n_eff * np.count_nonzero(rows) / data.n, 2.0)
 
 
-def _nelder_mead(cost: Any, q0: np.ndarray, **options: Any) -> Any:
-    """Run Nelder–Mead from ``q0`` with scipy's first simplex (5 % of each coordinate).
+def _nelder_mead(cost: Any, q0: np.ndarray, **options: Any) -> Minimum:
+    """Run Nelder–Mead from ``q0`` with a first simplex of 5 % of each coordinate.
 
     A coordinate at 0 steps by 0.05 (scipy's 0.00025 would barely move a log-parameter
     at 1).
@@ -74,7 +74,7 @@ def _nelder_mead(cost: Any, q0: np.ndarray, **options: Any) -> Any:
     sim = np.tile(q0, (len(q0) + 1, 1))
     for i in range(len(q0)):
         sim[i + 1, i] += 0.05 * q0[i] if q0[i] != 0.0 else 0.05
-    return minimize(cost, q0, method='Nelder-Mead', options=dict(options, initial_simplex=sim))
+    return nelder_mead(cost, sim, **options)
 
 
 def _to(p: Param, v: float) -> float:
@@ -204,11 +204,9 @@ class Search:
             lo, hi = (_to(p, max(br[0], p.lo)), _to(p, min(br[1], p.hi)))
             if not hi > lo:
                 return eta
-            xatol = 1e-3 * self.data.summary.dt if p.name == 'tau' else (
-                0.01 if p.log else 1e-6 * abs(v0))
-            opt = minimize_scalar(lambda q: self.cost(dict(eta, **{p.name: _from(p, q)})),
-                                  bounds=(lo, hi), method='bounded',
-                                  options={'xatol': xatol})
+            xatol = p.tol or (0.01 if p.log else 1e-6 * abs(v0))
+            opt = brent_bounded(lambda q: self.cost(dict(eta, **{p.name: _from(p, q)})),
+                                lo, hi, xatol=xatol)
             new = dict(eta, **{p.name: _from(p, float(opt.x))})
             return new if self.cost(new) <= self.cost(eta) else eta
         q0 = np.array([_to(p, float(eta[p.name])) for p in params])
@@ -367,8 +365,7 @@ class Search:
                 cand = [(float(min(vals)), qb)]
                 a, b = max(qb - h, lo_q), min(qb + h, hi_q)
                 if b > a:
-                    opt = minimize_scalar(cost, bounds=(a, b), method='bounded',
-                                          options={'xatol': 1e-4})
+                    opt = brent_bounded(cost, a, b, xatol=1e-4)
                     cand.append((float(opt.fun), float(opt.x)))
                 f, q = min(cand)
                 if f < best * (1.0 - 1e-9):

@@ -83,7 +83,7 @@ class DelayTerm(Term):
         hi = min(0.03, 0.1 * s.duration)
         grid = tuple(np.arange(0.0, hi + 1e-12, max(0.5 * s.dt, hi / 60.0)))
         return (Param('tau', 0.0, hi, grid=grid,
-                      steps=tuple(s.dt * np.linspace(-2.0, 2.0, 17))),)
+                      steps=tuple(s.dt * np.linspace(-2.0, 2.0, 17)), tol=1e-3 * s.dt),)
 
     def encode(self, values: Mapping, eta: Mapping, ctx: Context) -> list[Effect]:
         """Return the fitted delay."""

@@ -240,6 +240,9 @@ class Param:
         ``lo`` is the least value the run resolves (set from the sensor or the
         sampling): an estimate within two standard errors of it is not evidence of
         the effect — the data cannot tell it from less than the run can show.
+    tol : float
+        The step at which its local search of one scalar stops [its unit] (0: a
+        millionth of the value; a hundredth of the logarithm for a ``log`` parameter).
     """
 
     name: str
@@ -251,6 +254,7 @@ class Param:
     vector: int = 0
     profile: bool = False
     resolved: bool = False
+    tol: float = 0.0
 
     def clip(self, v: float) -> float:
         """Return ``v`` within the bounds."""

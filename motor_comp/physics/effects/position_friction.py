@@ -17,7 +17,7 @@ slopes solve a linear system in the values); the zero end slopes make the consta
 continuation beyond the end knots continuous in slope too (C¹ on the whole line), where
 a natural spline would leave a kink in the friction level at each end of the span.  The
 spline is written in Hermite form — knot values and knot slopes, the slopes ``S·dfc``
-from the clamped-spline system solved once by :class:`scipy.interpolate.CubicSpline` —
+from the clamped-spline system solved once (:func:`slope_matrix`) —
 so it passes through every knot value exactly, and the compiled law
 (:func:`spline_sum`) is a bisection and one cubic.  A law evaluated inside the plant's
 RK4 stages cannot call scipy, which is why the evaluation is written here.
@@ -148,7 +148,8 @@ def slope_matrix(knots: np.ndarray) -> np.ndarray:
     """Return ``S`` (n × n) with the knot slopes of the clamped spline ``m = S·dfc`` [1/m].
 
     Column ``j`` holds the slopes of the spline through the unit values ``e_j``
-    (:class:`scipy.interpolate.CubicSpline`, ``bc_type='clamped'``: zero end slopes).
+    (the clamped spline: zero end slopes; the same numbers as
+    :class:`scipy.interpolate.CubicSpline` with ``bc_type='clamped'``).
     A read-only array, cached per knot tuple: the workbench's search builds the
     columns of the same knots hundreds of times (0.45 s of a 3.6 s fit built splines).
     """
@@ -157,13 +158,30 @@ def slope_matrix(knots: np.ndarray) -> np.ndarray:
 
 @functools.lru_cache(maxsize=256)
 def _slope_matrix(knots: tuple) -> np.ndarray:
-    # imported here: scipy.interpolate costs every `motor-comp` start ~0.25 s of CPU,
-    # and only a model with this effect needs it
-    from scipy.interpolate import CubicSpline
+    # The clamped spline's continuity of curvature at each inner knot, in slope form
+    # (de Boor, A Practical Guide to Splines, ch. IV):
+    #   h_i·m_{i−1} + 2(h_{i−1} + h_i)·m_i + h_{i−1}·m_{i+1} = 3(h_i·δ_{i−1} + h_{i−1}·δ_i),
+    # h_i = x_{i+1} − x_i, δ_i = (y_{i+1} − y_i)/h_i, m_0 = m_{n−1} = 0; solved with
+    # numpy for the unit values (scipy.interpolate's import cost ~0.15 s of CPU a fit
+    # for this small system; the tests compare against its CubicSpline).
     k = np.array(knots)
     n = k.shape[0]
-    S = CubicSpline(k, np.eye(n), bc_type='clamped', axis=0)(k, 1)
-    S[0] = S[-1] = 0.0   # the boundary condition itself (the solve leaves ~1e-13 there)
+    S = np.zeros((n, n))
+    if n > 2:
+        h = np.diff(k)
+        A = np.zeros((n - 2, n - 2))
+        B = np.zeros((n - 2, n))
+        for r in range(n - 2):
+            i = r + 1
+            A[r, r] = 2.0 * (h[i - 1] + h[i])
+            if r > 0:
+                A[r, r - 1] = h[i]
+            if r < n - 3:
+                A[r, r + 1] = h[i - 1]
+            B[r, i - 1] = -3.0 * h[i] / h[i - 1]
+            B[r, i] = 3.0 * h[i] / h[i - 1] - 3.0 * h[i - 1] / h[i]
+            B[r, i + 1] = 3.0 * h[i - 1] / h[i]
+        S[1:-1] = np.linalg.solve(A, B)
     S.setflags(write=False)
     return S
 
@@ -293,14 +311,21 @@ class PositionFriction(Effect):
         """Return ``(x, dfc(x))`` at the minimum of ``dfc`` over the knots' span [m, N].
 
         The candidates are the knots and the interior stationary points of each cubic
-        (roots of the spline's derivative, :meth:`scipy.interpolate.PPoly.roots`); the
-        values there come from this module's own law.
+        (the roots of its derivative, a quadratic in the Hermite form); the values
+        there come from this module's own law.
         """
-        from scipy.interpolate import CubicSpline   # see slope_matrix
-        cs = CubicSpline(self.knots, self.values, bc_type='clamped')
-        crit = cs.derivative().roots(extrapolate=False)
-        lo, hi = self.span
-        cand = np.concatenate([self.knots, crit[(crit > lo) & (crit < hi)]])
+        k, y, m = self.knots, self.values, self.slopes
+        crit = []
+        for i in range(len(k) - 1):
+            h = k[i + 1] - k[i]
+            # d/dt of the Hermite cubic on t ∈ [0, 1]: a·t² + b·t + c
+            a = 6.0 * (y[i] - y[i + 1]) + 3.0 * h * (m[i] + m[i + 1])
+            b = 6.0 * (y[i + 1] - y[i]) - h * (4.0 * m[i] + 2.0 * m[i + 1])
+            c = h * m[i]
+            roots = np.roots([a, b, c]) if a or b else np.zeros(0)
+            crit += [k[i] + float(t.real) * h for t in roots
+                     if abs(t.imag) <= 1e-12 and 0.0 < t.real < 1.0]
+        cand = np.concatenate([self.knots, np.array(crit, dtype=float)])
         vals = self.level(cand)
         i = int(np.argmin(vals))
         return float(cand[i]), float(vals[i])

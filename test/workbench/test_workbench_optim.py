@@ -1,0 +1,138 @@
+"""The hand-written minimisers and constrained least squares against scipy.optimize's.
+
+``optim`` and the active-set solvers of ``lsq`` are written in the package only to keep
+``scipy.optimize``'s import out of every ``fit`` and ``diagnose`` (issue 22's speed
+goal); the points they find must be scipy's: the same iterates for Brent's and
+Nelder–Mead's methods, the same minimiser (to rounding) for the quadratic programmes.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.optimize import lsq_linear, minimize, minimize_scalar
+
+from motor_comp.workbench.lsq import Bounds, box_qp, solve_gram
+from motor_comp.workbench.optim import brent_bounded, nelder_mead, next_fast_len
+
+
+def _bumpy(a: float, b: float, c: float):
+    """A scalar cost with a few local minima (what a period or a delay search sees)."""
+    return lambda x: (x - a) ** 2 + b * math.sin(c * x) + 0.1 * abs(x)
+
+
+@settings(max_examples=80, deadline=None)
+@given(a=st.floats(-3, 3), b=st.floats(0, 2), c=st.floats(0.5, 8), lo=st.floats(-5, 0),
+       width=st.floats(1e-3, 8), xatol=st.sampled_from([1e-8, 1e-5, 1e-3, 0.05]))
+def test_brent_takes_scipys_iterates(a, b, c, lo, width, xatol):
+    f = _bumpy(a, b, c)
+    ours, theirs = [], []
+    got = brent_bounded(lambda x: ours.append(x) or f(x), lo, lo + width, xatol=xatol)
+    want = minimize_scalar(lambda x: theirs.append(x) or f(x), bounds=(lo, lo + width),
+                           method='bounded', options={'xatol': xatol})
+    assert ours == [float(x) for x in theirs]
+    assert got.x == float(want.x) and got.fun == float(want.fun) and got.nfev == want.nfev
+
+
+def _rosen_like(scale: np.ndarray):
+    def f(q: np.ndarray) -> float:
+        z = q * scale
+        return float(np.sum(100.0 * (z[1:] - z[:-1] ** 2) ** 2 + (1.0 - z[:-1]) ** 2)
+                     + 0.01 * np.sum(z ** 2))
+    return f
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(1, 4), seed=st.integers(0, 2 ** 16),
+       xatol=st.sampled_from([1e-3, 2e-2]), maxiter=st.integers(5, 120))
+def test_nelder_mead_takes_scipys_iterates(n, seed, xatol, maxiter):
+    rng = np.random.default_rng(seed)
+    f = _rosen_like(rng.uniform(0.5, 2.0, n))
+    q0 = rng.normal(size=n)
+    sim = np.tile(q0, (n + 1, 1))
+    for i in range(n):
+        sim[i + 1, i] += 0.05 * q0[i] if q0[i] != 0.0 else 0.05
+    fatol = 1e-9 * f(q0)
+    got = nelder_mead(f, sim, xatol=xatol, fatol=fatol, maxiter=maxiter)
+    want = minimize(f, q0, method='Nelder-Mead',
+                    options={'initial_simplex': sim, 'xatol': xatol, 'fatol': fatol,
+                             'maxiter': maxiter})
+    np.testing.assert_array_equal(got.x, want.x)
+    assert got.fun == want.fun and got.nfev == want.nfev
+
+
+def test_nelder_mead_finds_a_bowls_minimum():
+    w, c = np.array([1.0, 30.0, 0.2]), np.array([0.3, -1.2, 2.0])
+    f = lambda q: float(np.sum(w * (q - c) ** 2))  # noqa: E731
+    sim = np.vstack([np.zeros(3), 0.05 * np.eye(3)])
+    got = nelder_mead(f, sim, xatol=1e-8, fatol=1e-14, maxiter=5000)
+    np.testing.assert_allclose(got.x, c, atol=1e-5)
+    assert got.fun < 1e-9
+
+
+@pytest.mark.parametrize('n', [1, 2, 7, 97, 1000, 4097, 65537, 199999])
+def test_fast_lengths_are_scipys(n):
+    from scipy.fft import next_fast_len as ref
+    assert next_fast_len(n) == ref(n)
+
+
+def _problem(rng: np.random.Generator, p: int, collinear: bool):
+    n = p + int(rng.integers(1, 40))
+    X = rng.normal(size=(n, p)) * rng.lognormal(0.0, 1.5, size=p)
+    if collinear and p > 1:
+        X[:, -1] = X[:, 0] + 1e-4 * rng.normal(size=n)
+    y = rng.normal(size=n) * 3.0
+    G = np.zeros((p + 1, p + 1))
+    Z = np.column_stack([X, y])
+    G[:] = Z.T @ Z
+    return X, y, G
+
+
+@settings(max_examples=120, deadline=None)
+@given(p=st.integers(1, 20), seed=st.integers(0, 2 ** 16), collinear=st.booleans())
+def test_box_qp_is_bounded_least_squares(p, seed, collinear):
+    rng = np.random.default_rng(seed)
+    X, y, G = _problem(rng, p, collinear)
+    lo = np.where(rng.random(p) < 0.6, 0.0, -np.inf)
+    hi = np.where(rng.random(p) < 0.2, rng.random(p), np.inf)
+    lo = np.minimum(lo, hi)
+    A, b = G[:p, :p], G[:p, p]
+    d = np.sqrt(np.diag(A))
+    As = A / np.outer(d, d) + 1e-10 * np.eye(p)
+    x = box_qp(As, b / d, lo * d, hi * d) / d
+    tol = 1e-12 * np.maximum(np.abs(x), 1.0)
+    assert np.all(x >= lo - tol) and np.all(x <= hi + tol)
+    # scipy's BVLS on the same (column-scaled, ridged) problem, through its Cholesky
+    # factor: ‖Rθ − R⁻ᵀb‖² = θᵀAθ − 2bᵀθ + const
+    R = np.linalg.cholesky(As).T
+    ref = lsq_linear(R, np.linalg.solve(R.T, b / d), bounds=(lo * d, hi * d), method='bvls',
+                     tol=1e-12).x / d
+    q = lambda t: float(0.5 * (t * d) @ As @ (t * d) - (b / d) @ (t * d))  # noqa: E731
+    # to rounding: what a solve on this system can resolve
+    tol = max(1e-10, 1e-14 * np.linalg.cond(As))
+    assert q(x) <= q(ref) + tol * max(1.0, abs(q(ref)))
+
+
+@settings(max_examples=120, deadline=None)
+@given(p=st.integers(2, 10), m=st.integers(1, 3), seed=st.integers(0, 2 ** 16))
+def test_linear_constraints_are_held_at_slsqps_minimum(p, m, seed):
+    rng = np.random.default_rng(seed)
+    X, y, G = _problem(rng, p, False)
+    lo = np.where(rng.random(p) < 0.5, 0.0, -np.inf)
+    hi = np.full(p, np.inf)
+    C = np.zeros((m, p))
+    for r in range(m):     # the terms' own kind: fc ± dfc/2 ≥ 0, fc + dfc_j ≥ 0
+        i, j = rng.choice(p, 2, replace=False)
+        C[r, i], C[r, j] = 1.0, rng.choice([-0.5, 0.5, 1.0])
+    th, sse = solve_gram(G, Bounds(lo, hi, C, np.zeros(m)))
+    scale = max(1.0, float(np.max(np.abs(th))))
+    assert np.all(C @ th >= -1e-9 * scale) and np.all(th >= lo)
+    f = lambda t: 0.5 * float(np.sum((y - X @ t) ** 2))  # noqa: E731
+    ref = minimize(f, np.zeros(p), jac=lambda t: -(X.T @ (y - X @ t)), method='SLSQP',
+                   bounds=list(zip(lo, hi)), constraints=[{'type': 'ineq',
+                                                           'fun': lambda t: C @ t}],
+                   options={'ftol': 1e-15, 'maxiter': 500}).x
+    assert f(th) <= f(ref) + 1e-8 * max(1.0, float(y @ y))
