@@ -42,6 +42,28 @@ def test_smoothing_at_the_rows_equals_full_rate_filtering(W, step, cols, seed):
     assert np.max(np.abs(proc.smooth_at(y[:, 0], rows, W) - ref[:, 0])) < 1e-13 * scale
 
 
+@settings(max_examples=40, deadline=None)
+@given(tau_samples=st.floats(0.0, 30.0), hold=st.sampled_from(['zoh', 'sample']))
+def test_the_delayed_input_smoothed_per_shift_equals_smoothing_it_whole(data, tau_samples,
+                                                                        hold):
+    # a delay search sums two or three smoothed whole-sample shifts: the same numbers as
+    # smoothing the delayed input itself (np.interp for a sampled input)
+    import dataclasses
+    from motor_comp.workbench.derivatives import InputHold
+    D0, plant = data
+    kin = dataclasses.replace(D0.kins[0], hold=InputHold(hold))
+    D = Dataset([kin], plant)
+    tau = tau_samples * kin.dt
+    view = D.at(tau=tau)
+    p, mo = D.parts[0], view.motions[0]
+    g = plant.input_gain
+    k = g * plant.back_emf + plant.damping        # the back-EMF and damping force
+    direct = kin.input_at(tau) if hold == 'zoh' else np.interp(kin.t - tau, kin.t, kin.u)
+    for got, factor in ((view.y(), g), (view.y(rests=True), g * (1.0 - mo.shares[3]))):
+        want = proc.smooth_at(factor * direct, p.rows, p.W) - k * view.signal(Signal.VELOCITY)
+        assert np.max(np.abs(got - want)) <= 1e-12 * max(1.0, float(np.max(np.abs(want))))
+
+
 def test_smoothing_refuses_rows_at_the_record_ends():
     with pytest.raises(ValueError, match='record ends'):
         proc.smooth_at(np.zeros(200), np.array([5, 100]), 21)
