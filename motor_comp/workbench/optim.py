@@ -45,13 +45,13 @@ def _away(value: float, step: float) -> float:
 
 def brent_bounded(f: Callable[[float], float], lo: float, hi: float, *, xatol: float = 1e-5,
                   maxfev: int = 500) -> Minimum:
-    """Return the minimum of ``f`` on ``[lo, hi]`` by Brent's method (golden section and
-    successive parabolic interpolation), to ``xatol`` (plus √ε of ``|x|``).
+    """Return the minimum of ``f`` on ``[lo, hi]`` by Brent's method, to ``xatol``.
 
-    The first point is the golden section of the interval from ``lo``; a parabolic step
-    is taken when it falls inside the interval and shrinks the step before last by
-    half, else a golden-section step; no point is evaluated closer than the tolerance
-    to another or to the ends.
+    Golden sections and successive parabolic interpolation; the tolerance grows by
+    √ε·|x|.  The first point is the golden section of the interval from ``lo``; a
+    parabolic step is taken when it falls inside the interval and shrinks the step
+    before last by half, else a golden-section step; no point is evaluated closer than
+    the tolerance to another or to the ends.
     """
     a, b = float(lo), float(hi)
     x = w = v = a + _GOLDEN * (b - a)
