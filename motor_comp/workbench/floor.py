@@ -57,7 +57,7 @@ import numpy as np
 from motor_comp.logs.run import Run
 from motor_comp.physics.axis import AxisModel
 from motor_comp.workbench.anchored import anchor, windows
-from motor_comp.workbench.dataset import Dataset
+from motor_comp.workbench.dataset import Dataset, model_signature
 from motor_comp.workbench.derivatives import InputHold, Kinematics, kinematics
 from motor_comp.workbench.library import given_residual, given_sse
 from motor_comp.workbench.processing import kernel, rest_runs, sliding_mask, \
@@ -134,12 +134,15 @@ def _sensor(kin: Kinematics) -> tuple[float, float]:
     return white, q
 
 
-def _synthetic(kin: Kinematics, model: AxisModel, length: int, rng: np.random.Generator,
-               sensor: bool) -> Kinematics:
-    """Return the anchored run of ``model`` measured like ``kin`` (or ideally)."""
+def _anchored(kin: Kinematics, model: AxisModel, length: int) -> np.ndarray:
+    """Return the run of ``model`` in windows of ``length`` anchored to ``kin`` [m]."""
     a = anchor(kin, model)
-    origins = np.arange(0, len(kin), length, dtype=np.int64)
-    x = windows(a, origins)
+    return windows(a, np.arange(0, len(kin), length, dtype=np.int64))
+
+
+def _synthetic(kin: Kinematics, x: np.ndarray, rng: np.random.Generator,
+               sensor: bool) -> Kinematics:
+    """Return the anchored run ``x`` (:func:`_anchored`) measured like ``kin`` (or ideally)."""
     if sensor:
         white, q = _sensor(kin)
         if white > 0:
@@ -240,7 +243,8 @@ def difference_bound(u: np.ndarray) -> float:
 
 
 def noise_floor(data: Dataset, model: AxisModel, *, seed: int = 0,
-                sensor_share: bool = True, bar: bool = False) -> Floor:
+                sensor_share: bool = True, bar: bool = False,
+                runs: dict | None = None) -> Floor:
     """Return the noise floor of ``model`` on ``data``'s runs (see the module docstring).
 
     ``sensor_share=False`` leaves out the noise-free twin that splits off the sensor's
@@ -250,7 +254,9 @@ def noise_floor(data: Dataset, model: AxisModel, *, seed: int = 0,
     a model still missing terms, and both refinements answer to that model's error: a
     twin that diverges keeps its replica rows only where both are slow (at the turns,
     where the residual is largest: 10 % under a 9.7 % model that still lacked a ripple),
-    and an error spread over the passband passes for the input's noise.
+    and an error spread over the passband passes for the input's noise.  ``runs``: a
+    cache of the anchored runs, shared by calls on the same runs (the bar and the
+    reported floor of one model simulate the same run); keyed by run, model and window.
     """
     rng = np.random.default_rng(seed)
     kins, ideal, masks = [], [], []
@@ -258,8 +264,15 @@ def noise_floor(data: Dataset, model: AxisModel, *, seed: int = 0,
         kin = part.kin
         length = max(WINDOW_SMOOTHERS * part.W, 50)
         try:
-            syn = _synthetic(kin, model, length, rng, True)
-            clean = _synthetic(kin, model, length, rng, False) if sensor_share else None
+            # one simulation for both records: they differ by the sensor alone
+            key = (id(kin), model_signature(model), length)
+            x = runs.get(key) if runs is not None else None
+            if x is None:
+                x = _anchored(kin, model, length)
+                if runs is not None:
+                    runs[key] = x
+            syn = _synthetic(kin, x, rng, True)
+            clean = _synthetic(kin, x, rng, False) if sensor_share else None
         except (FloatingPointError, ValueError):
             return Floor(float('nan'), float('nan'), kin.noise_std(), kin.quantum(), 0)
         # the rows both fit; for the report, the run's rows where the twin is its replica

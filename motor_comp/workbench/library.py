@@ -72,6 +72,12 @@ class Spec:
         return dict(self.eta.get(name, {}))
 
 
+def spec_key(spec: Spec) -> tuple:
+    """Return a hashable key of ``spec`` (its nonlinear values by their exact ``repr``)."""
+    eta = tuple((n, repr(sorted(spec.eta.get(n, {}).items()))) for n in spec.names)
+    return spec.names, eta, spec.mass_free, spec.mass
+
+
 def sticks(spec: Spec, data: Dataset) -> bool:
     """Whether the stuck samples at a turn carry the drive force into the friction.
 
@@ -344,5 +350,5 @@ def values_of(spec: Spec, labs: Sequence[tuple], theta: np.ndarray) -> dict:
 
 __all__ = ['Design', 'ORDER', 'Spec', 'context', 'dataset_for', 'design', 'encode',
            'given_residual', 'given_sse', 'labels', 'processing_for', 'reaches_stops',
-           'n_params', 'owned_columns', 'spec_of', 'sticks', 'target', 'term',
+           'n_params', 'owned_columns', 'spec_key', 'spec_of', 'sticks', 'target', 'term',
            'theta_of', 'values_of', 'view_for']

@@ -40,10 +40,10 @@ import math
 
 import numpy as np
 from numba import njit
-from scipy.ndimage import correlate1d
+
 
 from motor_comp.workbench.derivatives import Kinematics
-from motor_comp.workbench.savgol import savgol_coeffs
+from motor_comp.workbench.savgol import correlate1d, savgol_coeffs
 from motor_comp.workbench.turns import REVERSAL_HALF
 
 _COEFFS: dict = {}
@@ -94,24 +94,56 @@ def smooth_at(y: np.ndarray, rows: np.ndarray, W: int) -> np.ndarray:
         raise ValueError('rows within a smoother half-width of the record ends')
     b = kernel(W)
     if y.ndim == 1:
-        return _smooth_rows(np.ascontiguousarray(y).reshape(1, -1), rows, b)[:, 0]
-    return _smooth_rows(np.ascontiguousarray(y.T), rows, b)
+        return _smooth_rows(np.ascontiguousarray(y).reshape(1, -1), rows, b)[0]
+    return _smooth_rows(np.ascontiguousarray(y.T), rows, b).T
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True)
 def _smooth_rows(y, rows, b):
     # hand-written: scipy/numpy filter every sample; the rows are a sparse subset.
-    # Column by column, each a contiguous dot product (y is time-major per column).
-    h = b.shape[0] // 2
-    out = np.empty((rows.shape[0], y.shape[0]))
-    for c in range(y.shape[0]):
-        yc = y[c]
-        for i in range(rows.shape[0]):
+    # Each row's sum runs over the taps in order, the same sum on every machine (a
+    # fast-math reduction is reassociated by the compiler, differently for each vector
+    # width); eight consecutive rows are summed side by side, which the compiler
+    # vectorises without reordering any sum (twice as fast as one row at a time).
+    nc, nr, W = y.shape[0], rows.shape[0], b.shape[0]
+    h = W // 2
+    out = np.empty((nc, nr))
+    i = 0
+    while i < nr:
+        if i + 8 <= nr and rows[i + 7] == rows[i] + 7:
             r0 = rows[i] - h
-            acc = 0.0
-            for j in range(b.shape[0]):
-                acc += b[j] * yc[r0 + j]
-            out[i, c] = acc
+            for c in range(nc):
+                yc = y[c]
+                a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = 0.0
+                for j in range(W):
+                    bj = b[j]
+                    p = r0 + j
+                    a0 += bj * yc[p]
+                    a1 += bj * yc[p + 1]
+                    a2 += bj * yc[p + 2]
+                    a3 += bj * yc[p + 3]
+                    a4 += bj * yc[p + 4]
+                    a5 += bj * yc[p + 5]
+                    a6 += bj * yc[p + 6]
+                    a7 += bj * yc[p + 7]
+                out[c, i] = a0
+                out[c, i + 1] = a1
+                out[c, i + 2] = a2
+                out[c, i + 3] = a3
+                out[c, i + 4] = a4
+                out[c, i + 5] = a5
+                out[c, i + 6] = a6
+                out[c, i + 7] = a7
+            i += 8
+        else:
+            r0 = rows[i] - h
+            for c in range(nc):
+                yc = y[c]
+                acc = 0.0
+                for j in range(W):
+                    acc += b[j] * yc[r0 + j]
+                out[c, i] = acc
+            i += 1
     return out
 
 

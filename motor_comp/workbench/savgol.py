@@ -15,9 +15,119 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.ndimage import correlate1d
+from numba import njit
 
 _CACHE: dict = {}
+
+#: the float64 machine epsilon (C's ``DBL_EPSILON``)
+_EPS = float(np.finfo(float).eps)
+
+
+def correlate1d(x: np.ndarray, weights: np.ndarray, *, axis: int = 0,
+                mode: str = 'mirror') -> np.ndarray:
+    """Correlate ``x`` with ``weights`` along ``axis``: ``scipy.ndimage.correlate1d``'s sums.
+
+    Written here because importing ``scipy.ndimage`` (with the ``scipy.special`` it
+    loads) cost every command that reads a run 0.07 s of CPU beyond what numba's first
+    call loads of scipy anyway.  The sums are ndimage's, term for term (bit for bit,
+    tested): an odd kernel whose taps mirror within the machine epsilon (a smoother) adds
+    each pair of samples before weighting them, outermost pair first, one that mirrors
+    with opposite signs (a derivative) their difference; any other kernel runs its taps
+    last-first.  A rounding off in the last bit moved samples across the sliding
+    threshold and flipped three marginal backlash decisions of the independent suite.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        Samples, any shape (float64).
+    weights : numpy.ndarray
+        Kernel of odd or even length, centred at ``len // 2`` (origin 0).
+    axis : int
+        Axis of the samples.
+    mode : {'mirror', 'constant'}
+        Extension beyond the ends: reflected about the end samples (``d c b | a b c d |
+        c b a``) or zeros.
+    """
+    if mode not in ('mirror', 'constant'):
+        raise ValueError(f"correlate1d mode must be 'mirror' or 'constant', got {mode!r}")
+    x = np.asarray(x, dtype=float)
+    w = np.ascontiguousarray(weights, dtype=float)
+    n = len(w)
+    size1 = n // 2
+    symmetric = 0
+    if n % 2:
+        symmetric = 1
+        for i in range(1, size1 + 1):
+            if abs(w[size1 + i] - w[size1 - i]) > _EPS:
+                symmetric = 0
+                break
+        if not symmetric:
+            symmetric = -1
+            for i in range(1, size1 + 1):
+                if abs(w[size1 + i] + w[size1 - i]) > _EPS:
+                    symmetric = 0
+                    break
+    lines = np.ascontiguousarray(np.moveaxis(x, axis, -1)).reshape(-1, x.shape[axis])
+    out = _correlate_lines(lines, w, mode == 'mirror', symmetric)
+    shape = np.moveaxis(x, axis, -1).shape
+    return np.ascontiguousarray(np.moveaxis(out.reshape(shape), -1, axis))
+
+
+@njit(cache=True)
+def _mirror_index(k, L):
+    # the sample at index k of a line of L reflected about its end samples, repeatedly
+    if L == 1:
+        return 0
+    p = 2 * (L - 1)
+    k = k % p
+    return k if k < L else p - k
+
+
+@njit(cache=True)
+def _correlate_lines(lines, w, mirror, symmetric):
+    # ndimage's NI_Correlate1D on each line: the same extension and, for every output,
+    # the same sum in the same order (taken tap by tap across the line, which the
+    # compiler vectorises without reordering any one sum)
+    nl, L = lines.shape
+    n = w.shape[0]
+    size1 = n // 2
+    size2 = n - size1 - 1
+    out = np.empty((nl, L))
+    buf = np.empty(L + size1 + size2)
+    for li in range(nl):
+        line = lines[li]
+        for k in range(-size1, L + size2):
+            if 0 <= k < L:
+                buf[k + size1] = line[k]
+            elif mirror:
+                buf[k + size1] = line[_mirror_index(k, L)]
+            else:
+                buf[k + size1] = 0.0
+        o = out[li]
+        if symmetric != 0:
+            w0 = w[size1]
+            for ll in range(L):
+                o[ll] = buf[ll + size1] * w0
+            for jj in range(-size1, 0):
+                wj = w[size1 + jj]
+                lo = size1 + jj
+                hi = size1 - jj
+                if symmetric > 0:
+                    for ll in range(L):
+                        o[ll] += (buf[ll + lo] + buf[ll + hi]) * wj
+                else:
+                    for ll in range(L):
+                        o[ll] += (buf[ll + lo] - buf[ll + hi]) * wj
+        else:
+            wl = w[size1 + size2]
+            for ll in range(L):
+                o[ll] = buf[ll + size1 + size2] * wl
+            for jj in range(-size1, size2):
+                wj = w[size1 + jj]
+                lo = size1 + jj
+                for ll in range(L):
+                    o[ll] += buf[ll + lo] * wj
+    return out
 
 
 def _check(window: int, polyorder: int, deriv: int) -> None:

@@ -166,39 +166,74 @@ def variables(data: Dataset, spec: Spec, model: Any, r: np.ndarray) -> dict[str,
             'speed_sign': np.sign(v)}
 
 
-def _cv_share(z: np.ndarray, r: np.ndarray, fold: np.ndarray, folds: int,
+class _Bins:
+    """The bins of one scanned variable ``z`` and the folds' rows, shared by its scans.
+
+    A variable is scanned against the residual and its direction-signed twin, at each
+    bin count of :data:`BINS`: its quantile edges and bin indices are computed once per
+    bin count, the folds' row indices once per scan (the same sums as before, taken
+    from index arrays instead of boolean masks).
+    """
+
+    def __init__(self, z: np.ndarray, folds: tuple) -> None:
+        self.z = z
+        self.ok = np.isfinite(z)
+        self.zs = z[self.ok]
+        self.folds = folds if bool(self.ok.all()) else None
+        self._by: dict = {}
+
+    def at(self, bins: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """Return the edges and each row's bin at ``bins`` quantile bins (None: too few)."""
+        if bins not in self._by:
+            got = None
+            if len(self.zs) >= 4 * bins:
+                edges = np.unique(np.quantile(self.zs, np.linspace(0.0, 1.0, bins + 1)))
+                if len(edges) >= 3:
+                    idx = np.clip(np.searchsorted(edges, self.z, side='right') - 1, 0,
+                                  len(edges) - 2)
+                    got = (edges, idx)
+            self._by[bins] = got
+        return self._by[bins]
+
+
+def _fold_rows(fold: np.ndarray, folds: int) -> tuple:
+    """Return each fold's (training, held-out) row indices."""
+    return tuple((np.flatnonzero(fold != f), np.flatnonzero(fold == f)) for f in range(folds))
+
+
+def _cv_share(zb: _Bins, r: np.ndarray, fold: np.ndarray, folds: int,
               bins: int) -> tuple[float, np.ndarray, np.ndarray]:
     """Held-out energy share of ``r`` a step function of ``z`` removes, and its bins."""
-    ok = np.isfinite(z)
-    zs = z[ok]
-    if len(zs) < 4 * bins:
+    got = zb.at(bins)
+    if got is None:
         return 0.0, np.zeros(0), np.zeros(0)
-    edges = np.unique(np.quantile(zs, np.linspace(0.0, 1.0, bins + 1)))
-    if len(edges) < 3:
-        return 0.0, np.zeros(0), np.zeros(0)
-    idx = np.clip(np.searchsorted(edges, z, side='right') - 1, 0, len(edges) - 2)
+    edges, idx = got
+    ok = zb.ok
     nb = len(edges) - 1
     removed = 0.0
     total = 0.0
     for f in range(folds):
-        tr, te = ok & (fold != f), ok & (fold == f)
+        tr, te = zb.folds[f] if zb.folds is not None else \
+            (ok & (fold != f), ok & (fold == f))
         cnt = np.bincount(idx[tr], minlength=nb)
         s = np.bincount(idx[tr], weights=r[tr], minlength=nb)
         mean = np.where(cnt > 0, s / np.maximum(cnt, 1), 0.0)
+        rt = r[te]
         pred = mean[idx[te]]
-        total += float(r[te] @ r[te])
-        removed += float(r[te] @ r[te] - (r[te] - pred) @ (r[te] - pred))
+        e = rt @ rt
+        total += float(e)
+        removed += float(e - (rt - pred) @ (rt - pred))
     cnt = np.bincount(idx[ok], minlength=nb)
     s = np.bincount(idx[ok], weights=r[ok], minlength=nb)
     return (removed / total if total > 0 else 0.0), edges, np.where(cnt > 0, s / np.maximum(
         cnt, 1), 0.0)
 
 
-def _best(z: np.ndarray, r: np.ndarray, fold: np.ndarray, folds: int) \
+def _best(zb: _Bins, r: np.ndarray, fold: np.ndarray, folds: int) \
         -> tuple[float, np.ndarray, np.ndarray]:
     best = (0.0, np.zeros(0), np.zeros(0))
     for b in BINS:
-        got = _cv_share(z, r, fold, folds, b)
+        got = _cv_share(zb, r, fold, folds, b)
         if got[0] > best[0]:
             best = got
     return best
@@ -207,17 +242,17 @@ def _best(z: np.ndarray, r: np.ndarray, fold: np.ndarray, folds: int) \
 def _scans(vars_: dict, r: np.ndarray, fold: np.ndarray, folds: int) -> dict:
     out = {}
     sgn = vars_['speed_sign']
+    rows = _fold_rows(fold, folds)
     for name in ('position', 'velocity', 'force', 'time', 'reversal'):
         z = vars_[name]
+        plain = _Bins(z, rows)
         for odd in (False, True):
-            if name == 'velocity':
-                zz = np.abs(z) if odd else z
-            elif name == 'force':
-                zz = np.abs(z) if odd else z
+            if name in ('velocity', 'force'):
+                zb = _Bins(np.abs(z), rows) if odd else plain
             else:
-                zz = z
+                zb = plain
             rr = r * sgn if odd else r
-            out[(name, odd)] = _best(zz, rr, fold, folds)
+            out[(name, odd)] = _best(zb, rr, fold, folds)
     return out
 
 

@@ -78,7 +78,7 @@ from motor_comp.workbench.floor import Floor, noise_floor
 from motor_comp.workbench.scan import NEAR_FLOOR
 from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.library import ORDER, Spec, given_sse, n_params, processing_for, \
-    spec_of
+    spec_key, spec_of
 from motor_comp.workbench.lsq import bic
 from motor_comp.workbench.result import CandidateResult, Estimate, estimate
 from motor_comp.workbench.elimination import Step, backward, prune, vector as _vector
@@ -160,8 +160,12 @@ class Engine:
         #: the candidates of each forward round, by the terms they were scored on
         self.verdicts = Verdicts()
         self._floors: dict = {}
+        #: the floors' anchored runs of the models, by run and model (kins live as long)
+        self._runs: dict = {}
         self._placebos: dict = {}
         self._warm: dict = {}
+        #: candidates scored, by the model they were scored on (:meth:`score`)
+        self._scored: dict = {}
         #: the given model on the rows it is judged on (the figure ``compare`` reports)
         self.given_data = self.data_for(spec_of(model))
         self.sse_given = given_sse(self.given_data, model)
@@ -197,7 +201,8 @@ class Engine:
         key = (id(D), model_signature(est.model), bar)
         hit = self._floors.get(key)
         if hit is None:
-            hit = self._floors[key] = noise_floor(D, est.model, sensor_share=False, bar=bar)
+            hit = self._floors[key] = noise_floor(D, est.model, sensor_share=False, bar=bar,
+                                                  runs=self._runs)
         return hit
 
     def floor_sse(self, est: Estimate, data: Dataset | None = None) -> float:
@@ -273,8 +278,20 @@ class Engine:
         """Score H0 + ``name``: all jointly refit, nonlinear parameters chosen in-fold.
 
         A candidate whose evidence lies at the stops is judged, with the model it joins,
-        on the rows that reach the stops.
+        on the rows that reach the stops.  The same question has one answer: a
+        candidate scored again on the same terms with the same nonlinear parameters (the
+        look-ahead's first step, then the forward round that took it) is the result of
+        the first scoring.  The key is the spec, not the fitted model: the linear
+        parameters are its fit on the same rows, equal but for the rounding of a Gram
+        assembled from cached products or afresh (1e-13).
         """
+        key = (spec_key(base.spec), name)
+        hit = self._scored.get(key)
+        if hit is None:
+            hit = self._scored[key] = self._score(base, name)
+        return hit
+
+    def _score(self, base: Estimate, name: str) -> CandidateResult:
         D = self.data_for(base.spec.with_(name, {}))
         sse0 = base.sse_cv if D is self.data_for(base.spec) else \
             cv_design(D, base.spec, base.model)[0]

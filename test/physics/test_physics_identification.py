@@ -18,7 +18,7 @@ from motor_comp.physics.effects import TERMS, VOCABULARY, make_effect
 from motor_comp.physics.effects.identification import Context, Summary
 from motor_comp.physics.effects.presliding import gms_trajectory, gms_unit_column, \
     gms_unit_columns, gms_unit_columns_sv, gms_unit_curve
-from motor_comp.physics.effects.ripple import sin_cos_columns
+from motor_comp.physics.effects.ripple import harmonic_columns
 
 
 def summary(**kw) -> Summary:
@@ -105,15 +105,28 @@ def test_gms_one_element_column_equals_the_general_kernel_bit_for_bit():
             assert np.array_equal(gms_unit_column(x, curve, 1 / d, 800.0, 1e-3, td, decay), one)
 
 
-def test_ripple_columns_in_one_pass_are_numpys_sine_and_cosine():
-    # the same product and libm calls: equal bit for bit where numpy's float64 sin/cos
-    # are the libm's (so on the project's machines); within an ulp wherever they are not
+def test_ripple_columns_in_one_pass_are_the_harmonics_sine_and_cosine():
+    # the fundamental: the same product and libm calls as numpy (bit for bit where
+    # numpy's float64 sin/cos are the libm's; within an ulp wherever they are not); the
+    # harmonics by the angle-addition recurrence, within 1e-14 of sin/cos(h·w·x)
     rng = np.random.default_rng(7)
     x = np.concatenate([rng.uniform(-0.1, 0.1, 20000), rng.uniform(-50.0, 50.0, 20000)])
     for w in (1.0, 2 * np.pi / 0.0291, 2 * np.pi * 6 / 0.0117):
-        sc = sin_cos_columns(w, x)
+        sc = harmonic_columns(w, x, 1)
         np.testing.assert_array_max_ulp(sc[:, 0], np.sin(w * x), maxulp=1)
         np.testing.assert_array_max_ulp(sc[:, 1], np.cos(w * x), maxulp=1)
+    # arguments up to 60 rad, so that the reference's own rounding of h·z (≤ 60 ulp
+    # of 1) stays under the tolerance
+    w = 2 * np.pi / 0.0291
+    x = rng.uniform(-0.0291 * 60 / (2 * np.pi) / 6, 0.0291 * 60 / (2 * np.pi) / 6, 20000)
+    sc = harmonic_columns(w, x, 6)
+    assert sc.shape == (len(x), 12)
+    z = w * x
+    for h in range(1, 7):
+        assert np.max(np.abs(sc[:, 2 * h - 2] - np.sin(h * z))) < 1e-14
+        assert np.max(np.abs(sc[:, 2 * h - 1] - np.cos(h * z))) < 1e-14
+    # a harmonic's value does not depend on how many are computed (its cache key)
+    assert np.array_equal(harmonic_columns(w, x, 3), sc[:, :6])
 
 
 def test_declared_needs_say_no_where_the_physics_does():

@@ -102,6 +102,26 @@ def test_time_ordered_speed_sweep_gets_viscous_with_the_right_value(sweep_kin):
         assert held.min() < 0.03 and held.max() > 0.15   # slow and fast in every fold
 
 
+def test_one_question_one_answer_a_candidate_scored_twice(sweep_kin):
+    """The look-ahead scores on the model the forward round then scores on: one result.
+
+    The same terms with the same nonlinear parameters are the same question, whatever
+    the rounding of a refit (its Gram from cached products or afresh): the second
+    scoring is the first's result, not a new search warm-started from it.
+    """
+    from motor_comp.workbench.selection import Engine
+    bare = AxisModel(mass=2 * PMLM.mass, input_gain=PMLM.input_gain)
+    eng = Engine([sweep_kin], bare, folds=8, min_gain=0.1)
+    h0 = eng.h0(bare)
+    first = eng.score(h0, 'coulomb')
+    again = estimate(eng.data_for(h0.spec), h0.spec, h0.model)
+    assert eng.score(again, 'coulomb') is first
+    assert eng.score(h0, 'viscous') is not first
+    base = estimate(eng.data_for(first.spec), first.spec, first.model)
+    assert eng.score(base, 'viscous').effect == 'viscous'
+    assert eng.score(base, 'viscous') is not eng.score(h0, 'viscous')
+
+
 def test_standard_errors_cover_the_truth_under_coloured_noise():
     """±2 SE holds the truth in most of 30 seeded runs with an AR(1) disturbance.
 
