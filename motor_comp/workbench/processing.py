@@ -100,17 +100,25 @@ def smooth_at(y: np.ndarray, rows: np.ndarray, W: int) -> np.ndarray:
 
 @njit(cache=True)
 def _smooth_rows(y, rows, b):
-    # hand-written: scipy/numpy filter every sample; the rows are a sparse subset.
-    # Each row's sum runs over the taps in order, the same sum on every machine (a
-    # fast-math reduction is reassociated by the compiler, differently for each vector
-    # width); eight consecutive rows are summed side by side, which the compiler
-    # vectorises without reordering any sum (twice as fast as one row at a time).
+    # hand-written: scipy/numpy filter every sample; the rows are a sparse subset (every
+    # W/8-th sample).  Each row's sum runs over the taps in order, the same sum on every
+    # machine (a fast-math reduction is reassociated by the compiler, differently for
+    # each vector width); eight rows equally spaced are summed side by side, eight
+    # independent sums the processor overlaps without reordering any (1.2–1.25× faster
+    # than a fast-math reduction per row in whole fits, every fifth or tenth sample).
     nc, nr, W = y.shape[0], rows.shape[0], b.shape[0]
     h = W // 2
     out = np.empty((nc, nr))
     i = 0
     while i < nr:
-        if i + 8 <= nr and rows[i + 7] == rows[i] + 7:
+        s = rows[i + 1] - rows[i] if i + 8 <= nr else 0
+        even = s > 0
+        if even:
+            for q in range(2, 8):
+                if rows[i + q] - rows[i + q - 1] != s:
+                    even = False
+                    break
+        if even:
             r0 = rows[i] - h
             for c in range(nc):
                 yc = y[c]
@@ -119,13 +127,13 @@ def _smooth_rows(y, rows, b):
                     bj = b[j]
                     p = r0 + j
                     a0 += bj * yc[p]
-                    a1 += bj * yc[p + 1]
-                    a2 += bj * yc[p + 2]
-                    a3 += bj * yc[p + 3]
-                    a4 += bj * yc[p + 4]
-                    a5 += bj * yc[p + 5]
-                    a6 += bj * yc[p + 6]
-                    a7 += bj * yc[p + 7]
+                    a1 += bj * yc[p + s]
+                    a2 += bj * yc[p + 2 * s]
+                    a3 += bj * yc[p + 3 * s]
+                    a4 += bj * yc[p + 4 * s]
+                    a5 += bj * yc[p + 5 * s]
+                    a6 += bj * yc[p + 6 * s]
+                    a7 += bj * yc[p + 7 * s]
                 out[c, i] = a0
                 out[c, i + 1] = a1
                 out[c, i + 2] = a2
