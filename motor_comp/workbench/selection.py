@@ -164,7 +164,7 @@ class Engine:
         self._runs: dict = {}
         self._placebos: dict = {}
         self._warm: dict = {}
-        #: candidates scored, by the model they were scored on (:meth:`score`)
+        #: candidates scored, by the spec they were scored on and their name (:meth:`score`)
         self._scored: dict = {}
         #: the given model on the rows it is judged on (the figure ``compare`` reports)
         self.given_data = self.data_for(spec_of(model))
