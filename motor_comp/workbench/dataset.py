@@ -452,10 +452,13 @@ class View:
                     if rests:
                         keep = 1.0 - path.rest
                         a = a * (keep[:, None] if a.ndim == 2 else keep)
-                    parts.append(proc.smooth_at(a, p.rows, p.W))
-                raw = np.concatenate(parts)
+                    # a block's columns smoothed column by column: each one's values
+                    # contiguous for the design, without a copy
+                    parts.append(proc.smooth_columns_at(a, p.rows, p.W) if a.ndim == 2
+                                 else proc.smooth_at(a, p.rows, p.W))
+                raw = np.concatenate(parts, axis=-1)
                 for i, col in group:
-                    a = raw[:, col.index] if raw.ndim == 2 else raw
+                    a = raw[col.index] if raw.ndim == 2 else raw
                     out[i] = self.data.cached(self.ckey(col, rests),
                                               lambda a=a, col=col: self._finish(col, a))
         return out  # type: ignore[return-value]

@@ -89,13 +89,22 @@ def smooth_at(y: np.ndarray, rows: np.ndarray, W: int) -> np.ndarray:
     fraction of the work; the rows are never within a smoother half-width of the ends.
     """
     y = np.asarray(y, dtype=float)
+    if y.ndim == 1:
+        return smooth_columns_at(y.reshape(-1, 1), rows, W)[0]
+    return smooth_columns_at(y, rows, W).T
+
+
+def smooth_columns_at(y: np.ndarray, rows: np.ndarray, W: int) -> np.ndarray:
+    """Return ``S(y)`` at ``rows`` column by column: shape ``(columns, rows)``.
+
+    :func:`smooth_at` without its final transpose: each column's values contiguous, as
+    the design takes them (a Fortran-ordered ``y`` is read without a copy).
+    """
+    y = np.asarray(y, dtype=float)
     h = W // 2
     if len(rows) and (rows[0] < h or rows[-1] + h >= y.shape[0]):
         raise ValueError('rows within a smoother half-width of the record ends')
-    b = kernel(W)
-    if y.ndim == 1:
-        return _smooth_rows(np.ascontiguousarray(y).reshape(1, -1), rows, b)[0]
-    return _smooth_rows(np.ascontiguousarray(y.T), rows, b).T
+    return _smooth_rows(np.ascontiguousarray(y.T), rows, kernel(W))
 
 
 @njit(cache=True)
@@ -432,4 +441,5 @@ class Processing:
 
 __all__ = ['Processing', 'fit_rows_mask', 'gms_position', 'held_ends', 'kernel', 'point_position',
            'point_velocity', 'short_window', 'sliding_mask', 'sliding_threshold', 'smooth_at',
-           'smooth_full', 'smoother_length', 'stencil', 'stencil_gain', 'touches']
+           'smooth_columns_at', 'smooth_full', 'smoother_length', 'stencil', 'stencil_gain',
+           'touches']

@@ -121,6 +121,7 @@ def test_ripple_columns_in_one_pass_are_the_harmonics_sine_and_cosine():
     x = rng.uniform(-0.0291 * 60 / (2 * np.pi) / 6, 0.0291 * 60 / (2 * np.pi) / 6, 20000)
     sc = harmonic_columns(w, x, 6)
     assert sc.shape == (len(x), 12)
+    assert sc.T.flags.c_contiguous      # column by column: smoothed without a copy
     z = w * x
     for h in range(1, 7):
         assert np.max(np.abs(sc[:, 2 * h - 2] - np.sin(h * z))) < 1e-14

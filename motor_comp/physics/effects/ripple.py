@@ -67,19 +67,21 @@ def harmonic_columns(w, x, nh):
     far below any force the columns are fitted to.
     """
     n = x.shape[0]
-    out = np.empty((n, 2 * nh))
+    # column by column in memory (returned transposed, Fortran-ordered): the smoothing
+    # reads each column whole, without a transposed copy
+    out = np.empty((2 * nh, n))
     for i in range(n):
         z = w * x[i]
         s1 = np.sin(z)
         c1 = np.cos(z)
         s, c = s1, c1
-        out[i, 0] = s
-        out[i, 1] = c
+        out[0, i] = s
+        out[1, i] = c
         for h in range(1, nh):
             s, c = s * c1 + c * s1, c * c1 - s * s1
-            out[i, 2 * h] = s
-            out[i, 2 * h + 1] = c
-    return out
+            out[2 * h, i] = s
+            out[2 * h + 1, i] = c
+    return out.T
 
 
 @dataclasses.dataclass(frozen=True)
