@@ -67,6 +67,13 @@ def _fmt(v: float) -> str:
     return '—' if not math.isfinite(v) else f'{v:.6g}'
 
 
+def _fmt_se(se: float | None) -> str:
+    # infinite: the run never moved the parameter (see uncertainty.delta_se)
+    if se is None or math.isnan(se):
+        return '—'
+    return 'not resolved by this run' if math.isinf(se) else f'{se:.3g}'
+
+
 def _table(head: list[str], rows: list[list[str]]) -> str:
     h = ''.join(f'<th>{html.escape(c)}</th>' for c in head)
     body = ''.join('<tr>' + ''.join(f'<td>{c}</td>' for c in r) + '</tr>' for r in rows)
@@ -236,7 +243,7 @@ def _page(out: Any, data: dict, figs: list[Path]) -> str:
     # -- the model ------------------------------------------------------------------------
     if out.fit is not None:
         parts.append('<h2>The fitted model</h2>')
-        rows = [[e(g), e(k), _fmt(v), '—' if se is None else f'{se:.3g}']
+        rows = [[e(g), e(k), _fmt(v), _fmt_se(se)]
                 for g, k, v, se in _parameters(out.fit.model, out.fit.uncertainty)]
         parts.append(_table(['effect', 'parameter', 'value (SI)', 'standard error'], rows))
         rows = [[str(i), e(str(s.effect or 'start model')),

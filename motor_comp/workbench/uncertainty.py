@@ -211,7 +211,14 @@ def correlations(cov: np.ndarray, labels: list) -> list[tuple[str, str, float]]:
 
 def delta_se(fn: Callable[[Mapping], float], vals: Mapping, idx: Mapping,
              cov: np.ndarray) -> float:
-    """Return the standard error of ``fn(vals)`` by the delta method."""
+    """Return the standard error of ``fn(vals)`` by the delta method.
+
+    Infinite when ``fn`` depends on the parameters but the covariance gives it no
+    spread at all: no stretch of the run moved them (their Jacobian column is zero —
+    a GMS attraction rate so fast that every element relaxes within a sample), so the
+    run does not resolve it.  NaN when no standard error applies (``fn`` depends on
+    no fitted parameter, e.g. a structure's element count) or none could be computed.
+    """
     base = fn(vals)
     g = np.zeros(cov.shape[0])
     for lab, i in idx.items():
@@ -221,6 +228,8 @@ def delta_se(fn: Callable[[Mapping], float], vals: Mapping, idx: Mapping,
         g[i] = (fn(v2) - base) / h
     with np.errstate(over='ignore', invalid='ignore'):
         var = float(g @ cov @ g)
+    if var == 0.0 and np.any(g != 0.0) and np.all(np.isfinite(g)):
+        return math.inf
     return math.sqrt(var) if var > 0 and np.isfinite(var) else float('nan')
 
 
