@@ -67,10 +67,10 @@ def correlate1d(x: np.ndarray, weights: np.ndarray, *, axis: int = 0,
                 if abs(w[size1 + i] + w[size1 - i]) > _EPS:
                     symmetric = 0
                     break
-    lines = np.ascontiguousarray(np.moveaxis(x, axis, -1)).reshape(-1, x.shape[axis])
+    moved = np.moveaxis(x, axis, -1)
+    lines = np.ascontiguousarray(moved).reshape(-1, moved.shape[-1])
     out = _correlate_lines(lines, w, mode == 'mirror', symmetric)
-    shape = np.moveaxis(x, axis, -1).shape
-    return np.ascontiguousarray(np.moveaxis(out.reshape(shape), -1, axis))
+    return np.ascontiguousarray(np.moveaxis(out.reshape(moved.shape), -1, axis))
 
 
 @njit(cache=True)
