@@ -58,6 +58,9 @@ class Diagnosis:
     units: Units = LINEAR_UNITS
     runs: tuple = ()
     unexplained: Any = None
+    #: whether the baseline is judged on the rows that reach the stops (see
+    #: :attr:`CandidateResult.stops`)
+    stops: bool = False
 
     @functools.cached_property
     def residual(self) -> Residual:
@@ -114,8 +117,14 @@ class Diagnosis:
         lines.append('candidates (held-out):')
         for i, c in enumerate(self.candidates, start=1):
             flag = '+' if c.supported else ' '
+            rows = ''
+            if c.stops != self.stops and math.isfinite(c.base_nrmse):
+                # its figures are on other rows than the baseline's: they compare only
+                # with the model without it on the same rows
+                where = 'the rows that reach the stops' if c.stops else 'the sliding rows'
+                rows = f'  (on {where}, where the model leaves {100 * c.base_nrmse:.1f} %)'
             lines.append(f' {flag}{i:2d}. {c.effect:<10s} explained {100 * c.explained:6.1f} %'
-                         f'  NRMSE {100 * c.force_nrmse:5.1f} %  {_param_text(c)}')
+                         f'  NRMSE {100 * c.force_nrmse:5.1f} %  {_param_text(c)}{rows}')
         return '\n'.join(lines)
 
     def as_dict(self) -> dict[str, Any]:
@@ -231,7 +240,8 @@ def diagnose(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *, folds:
                      folds=folds, candidates=tuple(results), kin=kins[0],
                      model=model, refit=refit, experiment=tuple(exp),
                      identifiability=tuple(ident_notes), units=eng.units,
-                     runs=tuple(k.name for k in kins), unexplained=un)
+                     runs=tuple(k.name for k in kins), unexplained=un,
+                     stops=eng.given_data.processing.turns)
 
 
 __all__ = ['CandidateResult', 'Diagnosis', 'diagnose']

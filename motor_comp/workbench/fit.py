@@ -26,9 +26,35 @@ from motor_comp.workbench.reweight import reweighted
 from motor_comp.workbench.scan import scan
 from motor_comp.workbench.uncertainty import measurement_spread, processing_spread, \
     profile_se
-from motor_comp.workbench.varpro import search, searched
+from motor_comp.workbench.varpro import cv_design, search, searched
 from motor_comp.workbench.wording import MASS, REFIT, common_scale, experiment_notes, \
     identifiability_notes, model_scalars, params_text, scale_forces, significant_changes
+
+
+def _figure(eng: sel.Engine, before: Estimate, est: Estimate) -> str:
+    """Return a step's force NRMSE, with the model before it on the same rows if they moved.
+
+    A model with a term whose evidence is at the stops is judged on the rows that reach
+    them, the others on the sliding rows (:func:`.library.processing_for`): two figures
+    on different rows do not compare, so a step that changes the rows also gives the
+    model before it on the new ones (the same definition, ``cv_design``).
+    """
+    D = eng.data_for(est.spec)
+    if eng.data_for(before.spec) is D:
+        return f'force NRMSE {100 * est.nrmse_cv:.1f} %'
+    was = eng.nrmse(cv_design(D, before.spec, before.model)[0], D)
+    a, b = _distinct(est.nrmse_cv, was)
+    where = 'the rows that reach the stops' if D.processing.turns else 'the sliding rows'
+    return f'force NRMSE {a} % on {where}, where the model before this step leaves {b} %'
+
+
+def _distinct(x: float, y: float) -> tuple[str, str]:
+    """Return two fractions as percentages with the fewest decimals (1–3) that tell them apart."""
+    for d in (1, 2):
+        a, b = f'{100 * x:.{d}f}', f'{100 * y:.{d}f}'
+        if a != b:
+            return a, b
+    return f'{100 * x:.3f}', f'{100 * y:.3f}'
 
 
 @dataclasses.dataclass(frozen=True)
@@ -150,12 +176,16 @@ def fit(kin: Kinematics | Sequence[Kinematics], model: AxisModel, *,
     steps = [FitStep(None, eng.nrmse_given, model, 'starting model', 'start')]
     say(f'start: force NRMSE {100 * steps[0].force_nrmse:.1f} % (as given)')
 
+    shown: list[Estimate] = []
+
     def step(effect: str, action: str, est: Estimate, text: str) -> None:
         if not text:
             text = f'added {effect}: {params_text(est, effect, u)}'
         steps.append(FitStep(effect, est.nrmse_cv, est.model, text, action))
-        say(f'{text}; force NRMSE {100 * est.nrmse_cv:.1f} %')
+        say(f'{text}; {_figure(eng, shown[-1], est)}')
+        shown.append(est)
     est = eng.h0(model)
+    shown.append(est)
     refit = eng.refit_result(est)
     changes = '; '.join(c.sentence(u) for c in refit.changes) or 'no parameter moved'
     if not add and not auto:

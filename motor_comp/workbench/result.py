@@ -157,6 +157,11 @@ class CandidateResult:
         Parameters of the model that moved significantly in the joint refit.
     why_not : str
         Why it is outside its declared domain ('' when inside).
+    base_nrmse : float
+        Held-out force NRMSE of the model it joins, on the same rows as ``force_nrmse``.
+    stops : bool
+        Whether it is judged on the rows that reach the stops (a term with its evidence
+        at the turns), not on the sliding rows the model without it is judged on.
     """
 
     effect: str
@@ -176,6 +181,8 @@ class CandidateResult:
     at_bound: bool = False
     why_not: str = ''
     estimate: Any = None
+    base_nrmse: float = float('nan')
+    stops: bool = False
 
     @property
     def title(self) -> str:
@@ -205,6 +212,8 @@ class CandidateResult:
         """Return the JSON form (DESIGN.md §6 ``candidates`` entry)."""
         return {'effect': self.effect, 'title': self.title,
                 'explained': float(self.explained), 'force_nrmse': float(self.force_nrmse),
+                'base_force_nrmse': float(self.base_nrmse),
+                'rows': 'stops' if self.stops else 'sliding',
                 'params': self.params, 'uncertainty': self.uncertainty,
                 'n_params': self.n_params, 'bic_delta': float(self.bic_delta),
                 'supported': bool(self.supported), 'summary': self.sentence(),

@@ -332,6 +332,9 @@ def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: floa
           units: Units, shape: str, refused: str = '', inside: str = '') -> str:
     kind = 'friction' if odd else 'force'
     way = 'higher' if amp > 0 else 'lower'
+    # a bin edge at zero comes out of the quantiles as a rounding (2e-16 mm/s): it is 0
+    tiny = 1e-9 * max(abs(lo), abs(hi))
+    lo, hi = (0.0 if abs(lo) <= tiny else lo), (0.0 if abs(hi) <= tiny else hi)
     if against == 'position':
         k, u = (1e3, 'mm') if not units.rotary else (1.0, 'rad')
         span = f'over {k * lo:.4g}–{k * hi:.4g} {u} of the travel'

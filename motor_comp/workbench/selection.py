@@ -344,7 +344,7 @@ class Engine:
             supported=ok, model=est.model, changes=tuple(significant_changes(before, est)),
             units=self.units, correlations=tuple(est.correlations), spec=est.spec,
             at_bound=bool(est.at_bound.get(name)), why_not=why_not,
-            estimate=est)
+            estimate=est, base_nrmse=self.nrmse(sse0, D), stops=D.processing.turns)
 
     def refuter(self, base: Estimate, D: Dataset, name: str) -> Callable[[], float] | None:
         """Return the placebo :meth:`pays` may refute the floor with, or None.
@@ -399,7 +399,8 @@ class Engine:
             uncertainty={key(c): c.se for c in changes},
             scalars={key(c): c.fitted for c in changes}, n_params=est.n_params, bic_delta=b,
             supported=ok and bool(changes), model=model, changes=changes, units=self.units,
-            correlations=tuple(est.correlations), spec=est.spec, estimate=est)
+            correlations=tuple(est.correlations), spec=est.spec, estimate=est,
+            base_nrmse=self.nrmse(sse_given, D), stops=D.processing.turns)
 
 
 def _acc() -> Any:

@@ -365,3 +365,14 @@ def test_two_effects_that_hide_each_other_are_found_together():
     tau = gen.truth['effects']['delay']['tau']
     assert res.model.get('delay').tau == pytest.approx(tau, rel=0.05)
     assert res.unexplained.force_nrmse <= NEAR_FLOOR * res.unexplained.noise_floor_nrmse
+
+
+def test_a_span_from_zero_reads_from_zero():
+    """A quantile edge at zero speed is a rounding (2e-16 mm/s came out once): it reads 0."""
+    from motor_comp.workbench.scan import _text
+    from motor_comp.workbench.wording import LINEAR_UNITS
+    t = _text('velocity', True, 2.136e-19, 1e-3, 0.116, 0.1, LINEAR_UNITS, '')
+    assert 'at speeds 0–1 mm/s' in t, t
+    # a small edge that is not a rounding stays
+    t = _text('velocity', True, 2e-5, 1e-3, 0.116, 0.1, LINEAR_UNITS, '')
+    assert 'at speeds 0.02–1 mm/s' in t, t
