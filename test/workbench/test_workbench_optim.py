@@ -91,17 +91,22 @@ def _problem(rng: np.random.Generator, p: int, collinear: bool):
     return X, y, G
 
 
-@settings(max_examples=120, deadline=None)
-@given(p=st.integers(1, 20), seed=st.integers(0, 2 ** 16), collinear=st.booleans())
-def test_box_qp_is_bounded_least_squares(p, seed, collinear):
+def _box(p: int, seed: int, collinear: bool):
+    """Return a column-scaled, ridged box problem: As, b, d, lo, hi (the workbench's form)."""
     rng = np.random.default_rng(seed)
-    X, y, G = _problem(rng, p, collinear)
+    _, _, G = _problem(rng, p, collinear)
     lo = np.where(rng.random(p) < 0.6, 0.0, -np.inf)
     hi = np.where(rng.random(p) < 0.2, rng.random(p), np.inf)
     lo = np.minimum(lo, hi)
     A, b = G[:p, :p], G[:p, p]
     d = np.sqrt(np.diag(A))
-    As = A / np.outer(d, d) + 1e-10 * np.eye(p)
+    return A / np.outer(d, d) + 1e-10 * np.eye(p), b, d, lo, hi
+
+
+@settings(max_examples=120, deadline=None)
+@given(p=st.integers(1, 20), seed=st.integers(0, 2 ** 16), collinear=st.booleans())
+def test_box_qp_is_bounded_least_squares(p, seed, collinear):
+    As, b, d, lo, hi = _box(p, seed, collinear)
     x = box_qp(As, b / d, lo * d, hi * d) / d
     tol = 1e-12 * np.maximum(np.abs(x), 1.0)
     assert np.all(x >= lo - tol) and np.all(x <= hi + tol)
@@ -184,14 +189,8 @@ def test_box_qps_fallback_finds_the_same_minimum(p, seed, collinear):
     No run has reached it; forced here (no active-set step allowed), it must land on
     the active-set method's minimum.
     """
-    rng = np.random.default_rng(seed)
-    _, _, G = _problem(rng, p, collinear)
-    lo = np.where(rng.random(p) < 0.6, 0.0, -np.inf)
-    hi = np.where(rng.random(p) < 0.2, rng.random(p), np.inf)
-    lo = np.minimum(lo, hi)
-    A, b = G[:p, :p], G[:p, p]
-    d = np.sqrt(np.diag(A))
-    As, bs = A / np.outer(d, d) + 1e-10 * np.eye(p), b / d
+    As, b, d, lo, hi = _box(p, seed, collinear)
+    bs = b / d
     x = box_qp(As, bs, lo * d, hi * d)
     y = box_qp(As, bs, lo * d, hi * d, iterations=0)
     assert np.all(y >= lo * d) and np.all(y <= hi * d)
