@@ -189,6 +189,15 @@ class NodeProcess:
             return ''
         return ' | '.join(lines[-n:])
 
+    def warnings(self) -> list[str]:
+        """Return the node's logged warnings and errors (what a user should see)."""
+        try:
+            text = self.log.read_text(errors='replace')
+        except OSError:
+            return []
+        return [ln.strip() for ln in text.splitlines()
+                if '[WARN]' in ln or '[ERROR]' in ln]
+
 
 class NodeGroup:
     """Start node processes, watch them, and always stop them (context manager).
@@ -368,7 +377,14 @@ class RunSpec:
                                 'duration': float(self.duration), **table},
             'controller_node': {**common, **files, 'plant': self.plant,
                                 'mode': self.controller, 'feedforward': self.feedforward},
-            'recorder_node': {**files, 'output': str(self.output), 'timing': self.timing},
+            # the recorder knows which nodes come: it waits for them and their
+            # parameters as long as the run may take (the run's own timeout bounds it).
+            # Its 10 s default gave up on a plant still starting on a loaded machine;
+            # the plant then ran its 1.5 s lockstep and exited before the recorder had
+            # its parameters (params:plant_node missing, 1 of 4 node-test runs under
+            # two CPU hogs)
+            'recorder_node': {**files, 'output': str(self.output), 'timing': self.timing,
+                              'match_timeout': 600.0},
         }
         if self.limits.active:
             lim = self.limits
@@ -462,6 +478,11 @@ def run_nodes(spec: RunSpec, *, workdir: Path | None = None, timeout: float | No
                                            'controller_node', 'recorder_node'])
                 if statuses.get('controller_node') == TRIP_EXIT_STATUS:
                     tripped = trip_reason(group.procs['controller_node'])
+                if progress:
+                    # a recording without some node's parameters, or that started
+                    # without a publisher, says so here, not only in a deleted log
+                    for line in group.procs['recorder_node'].warnings():
+                        print(f'motor-comp run: {line}', file=sys.stderr)
                 if statuses.get('recorder_node', 0) != 0:
                     raise NodeProcessError(f'recorder_node exited with status '
                                            f'{statuses["recorder_node"]}: '

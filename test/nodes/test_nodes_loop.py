@@ -88,6 +88,10 @@ def test_lockstep_nodes_equal_in_process_simulator(tmp_path: Path, ros_env) -> N
 
     # run parameters as metadata, queried from the nodes' parameter services
     meta = recorded.metadata
+    # (the nodes' log on a miss: the recorder says what it waited for and for how long)
+    for key in ('params:controller_node/mode', 'params:plant_node/plant',
+                'params:trajectory_node/trajectory'):
+        assert key in meta, cli.stderr[-3000:]
     assert meta['params:controller_node/mode'] == 'npid'
     assert meta['params:controller_node/feedforward'] == 'static+gms'
     assert meta['params:plant_node/plant'] == 'ballscrew'
