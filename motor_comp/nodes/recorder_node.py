@@ -29,8 +29,10 @@ before the first measurement's stamp (at their arrival time if no sample ever co
 
 Run parameters (documented choice): the recorder *queries* the other nodes'
 parameters through their standard parameter services (``nodes`` parameter: the node
-names in the same namespace) as soon as they answer, and writes one MCAP metadata
-record per node (``params:<node>``, values as strings) immediately — so the record
+names in the same namespace) as soon as they answer — asking again every
+:data:`PARAM_RETRY_S` until they do, since a request lost in discovery is gone for
+good — and writes one MCAP metadata record per node (``params:<node>``, values as
+strings) immediately — so the record
 survives even a SIGKILL of the recorder.  Runtime changes arrive on
 ``/parameter_events`` and are written at the end as ``parameter_changes``
 (``<sim ns>:<node>.<param>`` → new value).  A ``run`` record states timing, counts and
@@ -126,6 +128,10 @@ PARAMS = (
 
 #: the optional topic recorded when present
 TOPIC_DIAGNOSTICS = '/diagnostics'
+#: ask a node for its parameters again if it has not answered this long after [s]: a
+#: service request or response sent before the other side's endpoint was discovered
+#: is lost (DDS does not resend it), and a lost one left the recorder waiting forever
+PARAM_RETRY_S = 2.0
 
 
 _STAMP = struct.Struct('<iI')   # header.stamp (sec, nanosec) right after the CDR header
@@ -300,7 +306,8 @@ class RecorderNode(ManagedNode):
         if not self._param_clients:
             self._param_clients = {n: AsyncParameterClient(self, f'{ns}/{n}')
                                    for n in names}
-        self._queried: set[str] = set()
+        #: when each node was last asked for its parameters (monotonic s)
+        self._asked: dict[str, float] = {}
         self._raw_params: dict[str, dict[str, Any]] = {}
         self._scenario_done = False
         if self._param_timer is not None:
@@ -447,21 +454,26 @@ class RecorderNode(ManagedNode):
 
     # -- run parameters --------------------------------------------------------------
     def _query_parameters(self) -> None:
+        now = time.monotonic()
         for name, client in self._param_clients.items():
-            if name in self._queried or not client.services_are_ready():
+            if name in self._raw_params or not client.services_are_ready():
                 continue
-            self._queried.add(name)
+            if now - self._asked.get(name, -math.inf) < PARAM_RETRY_S:
+                continue
+            self._asked[name] = now
             client.list_parameters(callback=lambda fut, n=name: self._on_list(n, fut))
-        if len(self._queried) == len(self._param_clients):
+        if len(self._raw_params) == len(self._param_clients):
             self._param_timer.cancel()
 
     def _on_list(self, name: str, future: Any) -> None:
+        if self._closed or name in self._raw_params:   # a retry's late twin
+            return
         names = list(future.result().result.names)
         self._param_clients[name].get_parameters(
             names, callback=lambda fut: self._on_values(name, names, fut))
 
     def _on_values(self, name: str, names: list[str], future: Any) -> None:
-        if self._closed:
+        if self._closed or name in self._raw_params:   # a retry's late twin
             return
         values = future.result().values
         raw = {n: parameter_value_to_python(v) for n, v in zip(names, values)}
