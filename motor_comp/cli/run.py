@@ -378,11 +378,11 @@ class RunSpec:
             'controller_node': {**common, **files, 'plant': self.plant,
                                 'mode': self.controller, 'feedforward': self.feedforward},
             # the recorder knows which nodes come: it waits for them and their
-            # parameters as long as the run may take (the run's own timeout bounds it).
-            # Its 10 s default gave up on a plant still starting on a loaded machine;
-            # the plant then ran its 1.5 s lockstep and exited before the recorder had
-            # its parameters (params:plant_node missing, 1 of 4 node-test runs under
-            # two CPU hogs)
+            # parameters as long as the run may take (the run's own timeout bounds it;
+            # a request lost in discovery is asked again, see recorder_node).  Its 10 s
+            # default gave up under two CPU hogs, and the plant ran its 1.5 s lockstep
+            # and exited before the recorder had its parameters (params:plant_node
+            # missing from the recording)
             'recorder_node': {**files, 'output': str(self.output), 'timing': self.timing,
                               'match_timeout': 600.0},
         }
