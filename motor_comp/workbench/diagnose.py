@@ -35,7 +35,7 @@ from motor_comp.workbench.residual import Residual, residual
 from motor_comp.workbench.result import CandidateResult
 from motor_comp.workbench.scan import scan
 from motor_comp.workbench.wording import LINEAR_UNITS, MASS, REFIT, common_scale, \
-    experiment_notes, gain_note, identifiability_notes, unresolved
+    experiment_notes, gain_note, identifiability_notes, rows_name, unresolved
 
 
 @dataclasses.dataclass(frozen=True)
@@ -121,8 +121,8 @@ class Diagnosis:
             if c.stops != self.stops and math.isfinite(c.base_nrmse):
                 # its figures are on other rows than the baseline's: they compare only
                 # with the model without it on the same rows
-                where = 'the rows that reach the stops' if c.stops else 'the sliding rows'
-                rows = f'  (on {where}, where the model leaves {100 * c.base_nrmse:.1f} %)'
+                rows = (f'  (on {rows_name(c.stops)}, where the model leaves '
+                        f'{100 * c.base_nrmse:.1f} %)')
             lines.append(f' {flag}{i:2d}. {c.effect:<10s} explained {100 * c.explained:6.1f} %'
                          f'  NRMSE {100 * c.force_nrmse:5.1f} %  {_param_text(c)}{rows}')
         return '\n'.join(lines)

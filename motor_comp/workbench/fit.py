@@ -28,24 +28,24 @@ from motor_comp.workbench.uncertainty import measurement_spread, processing_spre
     profile_se
 from motor_comp.workbench.varpro import cv_design, search, searched
 from motor_comp.workbench.wording import MASS, REFIT, common_scale, experiment_notes, \
-    identifiability_notes, model_scalars, params_text, scale_forces, significant_changes
+    identifiability_notes, model_scalars, params_text, rows_name, scale_forces, \
+    significant_changes
 
 
 def _figure(eng: sel.Engine, before: Estimate, est: Estimate) -> str:
     """Return a step's force NRMSE, with the model before it on the same rows if they moved.
 
-    A model with a term whose evidence is at the stops is judged on the rows that reach
-    them, the others on the sliding rows (:func:`.library.processing_for`): two figures
-    on different rows do not compare, so a step that changes the rows also gives the
-    model before it on the new ones (the same definition, ``cv_design``).
+    Two figures on different rows (:func:`.wording.rows_name`) do not compare, so a step
+    that changes the rows also gives the model before it on the new ones (the same
+    definition, ``cv_design``).
     """
     D = eng.data_for(est.spec)
     if eng.data_for(before.spec) is D:
         return f'force NRMSE {100 * est.nrmse_cv:.1f} %'
     was = eng.nrmse(cv_design(D, before.spec, before.model)[0], D)
     a, b = _distinct(est.nrmse_cv, was)
-    where = 'the rows that reach the stops' if D.processing.turns else 'the sliding rows'
-    return f'force NRMSE {a} % on {where}, where the model before this step leaves {b} %'
+    return (f'force NRMSE {a} % on {rows_name(D.processing.turns)}, where the model '
+            f'before this step leaves {b} %')
 
 
 def _distinct(x: float, y: float) -> tuple[str, str]:

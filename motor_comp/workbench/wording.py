@@ -92,6 +92,15 @@ def params_text(est: Any, name: str, units: Units) -> str:
     return ', '.join(fmt_param(name, k, v, se.get(k), units) for k, v in vals.items())
 
 
+def rows_name(stops: bool) -> str:
+    """Return the name of the rows a figure is judged on (one wording in every command).
+
+    A model with a term whose evidence is at the turns is judged on the rows that reach
+    the stops, the others on the sliding rows (:func:`.library.processing_for`).
+    """
+    return 'the rows that reach the stops' if stops else 'the sliding rows'
+
+
 def unresolved(value: float, se: float | None) -> bool:
     """Return whether a standard error is at least its value (no error bar).
 
@@ -298,5 +307,5 @@ def experiment_notes(summary: Any, units: Units) -> list[str]:
 __all__ = ['BRAKE', 'LINEAR_UNITS', 'MASS', 'ParameterChange', 'REFIT', 'ROTARY_UNITS',
            'SEPARATE', 'TITLES', 'axis_units', 'common_scale', 'directions', 'experiment_notes',
            'fmt_param', 'force_scaled', 'gain_note', 'identifiability_notes',
-           'model_scalars', 'more_words', 'params_text', 'scale_forces',
+           'model_scalars', 'more_words', 'params_text', 'rows_name', 'scale_forces',
            'significant_changes', 'unit_of', 'unresolved']
