@@ -21,15 +21,25 @@ $(STAMP): setup.py setup.cfg package.xml
 	$(PY) -m compileall -q motor_comp > /dev/null
 	touch $(STAMP)
 
-setup: $(STAMP)
+# the kernels `fit`/`diagnose` call from Python, compiled ahead of time (numba.pycc, C
+# compiler): a command then never starts numba's JIT (0.4-0.5 s of CPU each); rebuilt when
+# a source it inlines changes. If it cannot be built the commands use the JIT, as before.
+AOT_STAMP = motor_comp/physics/_aot_kernels.stamp
+AOT_SOURCES = $(wildcard motor_comp/physics/*.py motor_comp/physics/effects/*.py \
+                         motor_comp/workbench/*.py)
 
-demo: $(STAMP)
+$(AOT_STAMP): $(STAMP) $(AOT_SOURCES)
+	-$(PY) -m motor_comp.physics.aot_build
+
+setup: $(STAMP) $(AOT_STAMP)
+
+demo: $(STAMP) $(AOT_STAMP)
 	$(PY) -m motor_comp.cli.main demo --out demo_out
 
 # two workers, one test file each at a time (--dist loadfile: a module's fixtures are
 # computed once), CPU-bound workbench files beside the node tests; then the tests that
 # need the machine to themselves (wall-clock timing, marker `alone`), one at a time
-test: $(STAMP)
+test: $(STAMP) $(AOT_STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider -n 2 --dist loadfile -m 'not alone' test
 	$(PY) -m pytest -q -p no:cacheprovider -m alone test
 
@@ -37,7 +47,7 @@ lint: $(STAMP)
 	$(PY) -m flake8 motor_comp test bench launch setup.py
 	$(PY) -m pydocstyle motor_comp
 
-bench: $(STAMP)
+bench: $(STAMP) $(AOT_STAMP)
 	$(PY) bench/run_all.py
 
 # node tests N times in a row while two CPU-bound processes load both cores
@@ -47,3 +57,4 @@ stress: $(STAMP)
 clean:
 	rm -rf build install log demo_out .pytest_cache
 	find motor_comp -name '*.nbi' -o -name '*.nbc' | xargs rm -f
+	rm -f motor_comp/physics/_aot_kernels.*

@@ -15,6 +15,7 @@ import dataclasses
 import numpy as np
 from numba import njit
 
+from motor_comp.physics import aot
 from motor_comp.physics import kernel as K
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects.presliding import gms_update
@@ -25,6 +26,7 @@ from motor_comp.workbench.motion import motor_position
 from motor_comp.workbench.processing import gms_position, point_position, point_velocity
 
 
+@aot.ahead(*(aot.F8_1D,) * 4, *(aot.F8,) * 6)
 @njit(cache=True)
 def gms_states(x, alpha, k, sigma, C, fc, fs, vs, delta, dt):
     """Return the element forces and phases of a GMS along a measured path ``x`` [m].
@@ -80,6 +82,7 @@ def _advance(P, S, u, k, n_sub, interp):
         K.plant_advance(P, S, (1.0 - w) * u[k] + w * u[k + 1], 0.0, 1)
 
 
+@aot.ahead(*(aot.F8_1D,) * 6, aot.I8_1D, aot.I8, aot.I8, aot.F8_2D, aot.F8_2D, aot.BOOL)
 @njit(cache=True)
 def _kstep(P, S0, xm, xl, vm, u, origins, horizon, n_sub, gf, gz, interp):
     # every origin restarts the kernel from the measured state and runs it `horizon`
@@ -96,6 +99,7 @@ def _kstep(P, S0, xm, xl, vm, u, origins, horizon, n_sub, gf, gz, interp):
     return out
 
 
+@aot.ahead(*(aot.F8_1D,) * 6, aot.I8_1D, aot.I8, aot.F8_2D, aot.F8_2D, aot.BOOL)
 @njit(cache=True)
 def _windows(P, S0, xm, xl, vm, u, origins, n_sub, gf, gz, interp):
     # the load position of the model run from each origin to the next (a run made of
@@ -145,9 +149,9 @@ def anchor(kin: Kinematics, model: AxisModel, *, n_sub: int = 10) -> Anchor:
     gms = model.get('presliding')
     if gms is not None:
         fc, fs, vs, dl = model.stribeck_curve_params()
-        gf, gz = gms_states(np.ascontiguousarray(gms_position(kin, xm_raw)),
-                            np.array(gms.alpha), np.array(gms.k), np.array(gms.sigma),
-                            float(gms.C), fc, fs, vs, dl, kin.dt)
+        gf, gz = gms_states_entry(np.ascontiguousarray(gms_position(kin, xm_raw)),
+                                  np.array(gms.alpha), np.array(gms.k), np.array(gms.sigma),
+                                  float(gms.C), fc, fs, vs, dl, kin.dt)
     else:
         gf = gz = np.zeros((len(kin), 0))
     return Anchor(P, initial_state(P, 0.0), np.ascontiguousarray(point_position(kin, xm_raw)),
@@ -158,14 +162,21 @@ def anchor(kin: Kinematics, model: AxisModel, *, n_sub: int = 10) -> Anchor:
 
 def kstep(a: Anchor, origins: np.ndarray, horizon: int) -> np.ndarray:
     """Return the load position ``horizon`` samples after each origin [m]."""
-    return _kstep(a.P, a.S0, a.xm, a.xl, a.vm, a.u, origins, horizon, a.n_sub, a.gf, a.gz,
-                  a.interp)
+    return _kstep_entry(a.P, a.S0, a.xm, a.xl, a.vm, a.u, origins, horizon, a.n_sub, a.gf, a.gz,
+                        a.interp)
 
 
 def windows(a: Anchor, origins: np.ndarray) -> np.ndarray:
     """Return the run the model makes from each origin to the next, at every sample [m]."""
-    return _windows(a.P, a.S0, a.xm, a.xl, a.vm, a.u, origins.astype(np.int64), a.n_sub,
-                    a.gf, a.gz, a.interp)
+    return _windows_entry(a.P, a.S0, a.xm, a.xl, a.vm, a.u, origins.astype(np.int64), a.n_sub,
+                          a.gf, a.gz, a.interp)
 
 
 __all__ = ['Anchor', 'anchor', 'gms_states', 'kstep', 'windows']
+
+
+# Python calls the kernels above through their entries: compiled ahead of time where
+# built (see motor_comp.physics.aot), else the JIT
+gms_states_entry = aot.entry(gms_states)
+_kstep_entry = aot.entry(_kstep)
+_windows_entry = aot.entry(_windows)

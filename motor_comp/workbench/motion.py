@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from motor_comp.physics import aot
 from motor_comp.physics import kernel as K
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.plant import Sensors, initial_state, pack_params
@@ -36,10 +37,11 @@ def reversals(position: np.ndarray, hysteresis: float) -> list[tuple[int, int]]:
     [m] from its last extreme (a play operator on the measurement, so encoder flicker
     does not count).  Returns ``(index of the extreme, new direction ±1)`` pairs.
     """
-    idx, dirs = _reversals(np.ascontiguousarray(position, dtype=float), float(hysteresis))
+    idx, dirs = _reversals_entry(np.ascontiguousarray(position, dtype=float), float(hysteresis))
     return [(int(i), int(d)) for i, d in zip(idx, dirs)]
 
 
+@aot.ahead(aot.F8_1D, aot.F8)
 @njit(cache=True)
 def _reversals(position, hysteresis):
     # compiled: this runs inside the backlash width search, once per trial width
@@ -134,9 +136,9 @@ def motor_position(kin: Kinematics, width: float, model: AxisModel,
     P = pack_params(model.without('backlash', 'delay'), Sensors(encoder_resolution=0.0),
                     kin.dt / n_sub)
     S0 = initial_state(P, 0.0)
-    _flights(P, S0, xm, np.ascontiguousarray(u, dtype=float), float(tau) / kin.dt,
-             kin.hold is InputHold.SAMPLE, starts, rest, dirs, horizon.astype(np.int64),
-             float(width), n_sub)
+    _flights_entry(P, S0, xm, np.ascontiguousarray(u, dtype=float), float(tau) / kin.dt,
+                   kin.hold is InputHold.SAMPLE, starts, rest, dirs, horizon.astype(np.int64),
+                   float(width), n_sub)
     return xm
 
 
@@ -203,6 +205,8 @@ def _input_at(u, t, interpolate):
     return u[i]
 
 
+@aot.ahead(*(aot.F8_1D,) * 4, aot.F8, aot.BOOL, aot.I8_1D, aot.F8_1D, aot.F8_1D, aot.I8_1D,
+           aot.F8, aot.I8)
 @njit(cache=True)
 def _flights(P, S0, xm, u, shift, interpolate, starts, rest, dirs, horizon, width, n_sub):
     # ``shift`` = τ/dt [samples]: the input of each sub-step is taken at its middle, τ
@@ -237,3 +241,9 @@ def _flights(P, S0, xm, u, shift, interpolate, starts, rest, dirs, horizon, widt
 
 
 __all__ = ['motor_position', 'reversals']
+
+
+# Python calls the kernels above through their entries: compiled ahead of time where
+# built (see motor_comp.physics.aot), else the JIT
+_reversals_entry = aot.entry(_reversals)
+_flights_entry = aot.entry(_flights)

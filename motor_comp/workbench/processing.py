@@ -42,6 +42,7 @@ import numpy as np
 from numba import njit
 
 
+from motor_comp.physics import aot
 from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.savgol import correlate1d, savgol_coeffs
 from motor_comp.workbench.turns import REVERSAL_HALF
@@ -104,9 +105,10 @@ def smooth_columns_at(y: np.ndarray, rows: np.ndarray, W: int) -> np.ndarray:
     h = W // 2
     if len(rows) and (rows[0] < h or rows[-1] + h >= y.shape[0]):
         raise ValueError('rows within a smoother half-width of the record ends')
-    return _smooth_rows(np.ascontiguousarray(y.T), rows, kernel(W))
+    return _smooth_rows_entry(np.ascontiguousarray(y.T), rows, kernel(W))
 
 
+@aot.ahead(aot.F8_2D, aot.I8_1D, aot.F8_1D)
 @njit(cache=True)
 def _smooth_rows(y, rows, b):
     # hand-written: scipy/numpy filter every sample; the rows are a sparse subset (every
@@ -443,3 +445,8 @@ __all__ = ['Processing', 'fit_rows_mask', 'gms_position', 'held_ends', 'kernel',
            'point_velocity', 'short_window', 'sliding_mask', 'sliding_threshold', 'smooth_at',
            'smooth_columns_at', 'smooth_full', 'smoother_length', 'stencil', 'stencil_gain',
            'touches']
+
+
+# Python calls the kernels above through their entries: compiled ahead of time where
+# built (see motor_comp.physics.aot), else the JIT
+_smooth_rows_entry = aot.entry(_smooth_rows)

@@ -17,6 +17,8 @@ import math
 import numpy as np
 from numba import njit
 
+from motor_comp.physics import aot
+
 _CACHE: dict = {}
 
 #: the float64 machine epsilon (C's ``DBL_EPSILON``)
@@ -69,7 +71,7 @@ def correlate1d(x: np.ndarray, weights: np.ndarray, *, axis: int = 0,
                     break
     moved = np.moveaxis(x, axis, -1)
     lines = np.ascontiguousarray(moved).reshape(-1, moved.shape[-1])
-    out = _correlate_lines(lines, w, mode == 'mirror', symmetric)
+    out = _correlate_lines_entry(lines, w, mode == 'mirror', symmetric)
     return np.ascontiguousarray(np.moveaxis(out.reshape(moved.shape), -1, axis))
 
 
@@ -83,6 +85,7 @@ def _mirror_index(k, L):
     return k if k < L else p - k
 
 
+@aot.ahead(aot.F8_2D, aot.F8_1D, aot.BOOL, aot.I8)
 @njit(cache=True)
 def _correlate_lines(lines, w, mirror, symmetric):
     # ndimage's NI_Correlate1D on each line: the same extension and, for every output,
@@ -229,3 +232,8 @@ def savgol_filter(y: np.ndarray, window: int, polyorder: int, *, deriv: int = 0,
     om[:half] = head
     om[n - half:] = tail
     return out
+
+
+# Python calls the kernels above through their entries: compiled ahead of time where
+# built (see motor_comp.physics.aot), else the JIT
+_correlate_lines_entry = aot.entry(_correlate_lines)

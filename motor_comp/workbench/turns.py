@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from motor_comp.physics import aot
+
 #: half-width of the local position fit at a reversal, as a share of the derivative window
 #: (8 samples of a 21-sample window: about the time the drive takes to turn the axis)
 REVERSAL_HALF = 0.4
@@ -71,8 +73,8 @@ def reversal_shares(x: np.ndarray, v: np.ndarray, half: int, eps: float = 0.0, *
         return fwd, bwd, stuck
     sn = s[nz]
     flips = np.flatnonzero(sn[:-1] != sn[1:])
-    _fit_turns(np.ascontiguousarray(x, dtype=float), nz, sn, flips, int(half),
-               MIN_TURN * float(eps), bool(spread), float(MIN_STICK), fwd, bwd, stuck)
+    _fit_turns_entry(np.ascontiguousarray(x, dtype=float), nz, sn, flips, int(half),
+                     MIN_TURN * float(eps), bool(spread), float(MIN_STICK), fwd, bwd, stuck)
     return fwd, bwd, stuck
 
 
@@ -83,6 +85,8 @@ def _hat_before(d):
     return 0.5 * (1.0 + d) ** 2 if d <= 0.0 else 1.0 - 0.5 * (1.0 - d) ** 2
 
 
+@aot.ahead(aot.F8_1D, aot.I8_1D, aot.F8_1D, aot.I8_1D, aot.I8, aot.F8, aot.BOOL, aot.F8,
+           *(aot.F8_1D,) * 3)
 @njit(cache=True)
 def _fit_turns(x, nz, sn, flips, half, min_travel, spread, min_stick, fwd, bwd, stuck):
     # the turn loop of reversal_shares (compiled: it runs at every backlash trial)
@@ -196,3 +200,8 @@ def _span_search(y, t_lo, t_hi, half, stick):
 
 
 __all__ = ['MIN_STICK', 'MIN_TURN', 'REVERSAL_HALF', 'reversal_shares']
+
+
+# Python calls the kernels above through their entries: compiled ahead of time where
+# built (see motor_comp.physics.aot), else the JIT
+_fit_turns_entry = aot.entry(_fit_turns)

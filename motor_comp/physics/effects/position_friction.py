@@ -43,6 +43,7 @@ import numpy as np
 from numba import njit
 
 from motor_comp.errors import ParameterError, check_finite
+from motor_comp.physics import aot
 from motor_comp.physics.effects.base import Effect
 from motor_comp.physics.effects.identification import Column, Context, Summary, Term
 
@@ -101,6 +102,7 @@ def spline_sum(x, knots, ik, values, iv, slopes, im, n):
             + h * t * s * (s * slopes[im + lo] - t * slopes[im + hi]))
 
 
+@aot.ahead(aot.F8_1D, aot.F8_1D, aot.F8_1D, aot.array(1, readonly=True))
 @njit(cache=True, error_model='numpy')
 def position_friction_dfc(x, knots, values, slopes):
     """Return ``dfc(x)`` [N] at each position of the array ``x`` [m] (see :func:`spline_sum`).
@@ -119,6 +121,7 @@ def position_friction_dfc(x, knots, values, slopes):
     return out
 
 
+@aot.ahead(aot.F8_1D, aot.F8_1D, aot.I8_1D, aot.array(2, readonly=True))
 @njit(cache=True)
 def _hermite_basis(t, h, lo, slopes):
     """Rows of :meth:`PositionFriction.basis`: cubic Hermite weights of every knot value.
@@ -266,7 +269,7 @@ class PositionFriction(Effect):
     def level(self, x: np.ndarray) -> np.ndarray:
         """Change of the dry-friction level ``dfc(x)`` [N] at positions ``x`` [m]."""
         x = np.ascontiguousarray(np.atleast_1d(np.asarray(x, dtype=float)))
-        return position_friction_dfc(x, self.knots, self.values, self.slopes)
+        return position_friction_dfc_entry(x, self.knots, self.values, self.slopes)
 
     def force(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Extra friction force ``dfc(x)·sgn(v)`` [N] at positions [m] and velocities [m/s]."""
@@ -300,7 +303,7 @@ class PositionFriction(Effect):
         # the Hermite weights of spline_sum: the values at lo/hi and, through the
         # slopes m = S·dfc, every knot value (compiled: one pass over the n × knots
         # output instead of eight array passes, 0.3 s of a 60 s run's fit)
-        return _hermite_basis(t, h, lo, np.ascontiguousarray(slopes))
+        return _hermite_basis_entry(t, h, lo, np.ascontiguousarray(slopes))
 
     def regressors(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Columns ``b_j(x)·sgn(v)``; coefficients ``dfc_j`` [N]."""
@@ -468,3 +471,9 @@ class PositionFrictionTerm(Term):
 
 
 TERM = PositionFrictionTerm()
+
+
+# Python calls the kernels above through their entries: compiled ahead of time where
+# built (see motor_comp.physics.aot), else the JIT
+_hermite_basis_entry = aot.entry(_hermite_basis)
+position_friction_dfc_entry = aot.entry(position_friction_dfc)

@@ -42,6 +42,7 @@ import numpy as np
 from numba import njit
 
 from motor_comp.errors import ParameterError, check_nonnegative, check_positive
+from motor_comp.physics import aot
 from motor_comp.physics.effects.base import Effect
 from motor_comp.physics.effects.identification import Column, Context, Evidence, Param, \
     Summary, Term
@@ -350,6 +351,7 @@ def gms_unit_columns(x, inv_d, C, fs, vs, delta, dt, tdamp):
     return gms_unit_columns_sv(x, gms_unit_curve(x, fs, vs, delta, dt), inv_d, C, dt, tdamp)
 
 
+@aot.ahead(aot.F8_1D, *(aot.F8,) * 4)
 @njit(cache=True)
 def gms_unit_curve(x, fs, vs, delta, dt):
     """Stribeck curve per unit Coulomb level at each step's velocity along ``x`` [-].
@@ -388,6 +390,7 @@ def gms_unit_columns_sv(x, curve, inv_d, C, dt, tdamp):
     return out
 
 
+@aot.ahead(aot.F8_1D, aot.F8_1D, *(aot.F8,) * 4, aot.F8_1D)
 @njit(cache=True)
 def gms_unit_column(x, curve, inv_d, C, dt, tdamp, decay):
     """One column of :func:`gms_unit_columns_sv`: the element of ``1/d = inv_d`` alone.
@@ -547,9 +550,9 @@ class PreslidingTerm(Term):
             def block(p: Any) -> np.ndarray:
                 xg = np.ascontiguousarray(p.xg)
                 curve = p.memo(('gms_curve', ratio, vs, dl),
-                               lambda: gms_unit_curve(xg, 1.0 + ratio, vs, dl, p.dt))
-                return gms_unit_column(xg, curve, float(inv[j]), c, p.dt, float(td[j]),
-                                       _decays(p, (ratio, vs, dl, c), len(xg)))
+                               lambda: gms_unit_curve_entry(xg, 1.0 + ratio, vs, dl, p.dt))
+                return gms_unit_column_entry(xg, curve, float(inv[j]), c, p.dt, float(td[j]),
+                                             _decays(p, (ratio, vs, dl, c), len(xg)))
             return block
         return [Column(f'b{j}', ('gms', d, c, ratio, vs, dl, t), block_of(j), lo=0.0)
                 for j, (d, t) in enumerate(zip(dists, tdamp))]
@@ -623,3 +626,9 @@ class PreslidingTerm(Term):
 
 
 TERM = PreslidingTerm()
+
+
+# Python calls the kernels above through their entries: compiled ahead of time where
+# built (see motor_comp.physics.aot), else the JIT
+gms_unit_curve_entry = aot.entry(gms_unit_curve)
+gms_unit_column_entry = aot.entry(gms_unit_column)

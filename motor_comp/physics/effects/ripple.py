@@ -12,6 +12,7 @@ import numpy as np
 from numba import njit
 
 from motor_comp.errors import ParameterError, check_finite, check_positive
+from motor_comp.physics import aot
 from motor_comp.physics.effects.base import Effect
 from motor_comp.physics.effects.identification import Column, Context, Param, Summary, Term
 
@@ -53,6 +54,7 @@ def ripple_force(x, period, a, b):
     return ripple_sum(x, period, a, 0, b, 0, a.shape[0])
 
 
+@aot.ahead(aot.F8, aot.F8_1D, aot.I8)
 @njit(cache=True)
 def harmonic_columns(w, x, nh):
     """Return ``sin(h·w·x)``, ``cos(h·w·x)`` for ``h = 1…nh`` side by side, ``(n, 2·nh)``.
@@ -319,7 +321,7 @@ class RippleTerm(Term):
         # one block for every harmonic, in one compiled pass; a harmonic's value does
         # not depend on how many are computed, so its key is (period, h)
         def block(p: Any) -> np.ndarray:
-            return harmonic_columns(w1, np.ascontiguousarray(p.x, dtype=float), nh)
+            return harmonic_columns_entry(w1, np.ascontiguousarray(p.x, dtype=float), nh)
         cols = []
         for h in range(1, nh + 1):
             w = 2 * math.pi * h / period
@@ -356,3 +358,8 @@ class RippleTerm(Term):
 
 
 TERM = RippleTerm()
+
+
+# Python calls the kernels above through their entries: compiled ahead of time where
+# built (see motor_comp.physics.aot), else the JIT
+harmonic_columns_entry = aot.entry(harmonic_columns)

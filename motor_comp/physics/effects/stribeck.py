@@ -15,11 +15,13 @@ import numpy as np
 from numba import njit
 
 from motor_comp.errors import ParameterError, check_nonnegative, check_positive
+from motor_comp.physics import aot
 from motor_comp.physics.effects.base import Effect
 from motor_comp.physics.effects.identification import Column, Context, Evidence, Param, \
     Summary, Term
 
 
+@aot.ahead(aot.F8_1D, aot.F8)
 @njit(cache=True, inline='always', error_model='numpy')
 def stribeck_shape(z, delta):
     """Stribeck decay ``exp(−|z|^δ)`` [-] of the normalised speed ``z = v/vs``.
@@ -103,7 +105,7 @@ class Stribeck(Effect):
     def regressors(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Column whose coefficient is ``fs − fc`` for the current ``vs``, ``delta``."""
         v = np.asarray(v, dtype=float)
-        return (stribeck_shape(v * (1.0 / self.vs), self.delta) * np.sign(v))[:, None]
+        return (stribeck_shape_entry(v * (1.0 / self.vs), self.delta) * np.sign(v))[:, None]
 
 
 #: the run's 95th-percentile speed over the largest ``vs`` searched: the Stribeck rise
@@ -149,7 +151,7 @@ class StribeckTerm(Term):
         """Return the ``dfs = fs − fc`` column."""
         vs, dl = float(eta['vs']), float(eta['delta'])
         return [Column('dfs', ('stribeck_shares', vs, dl),
-                       lambda p: stribeck_shape(p.v / vs, dl) * (p.fwd - p.bwd), lo=0.0)]
+                       lambda p: stribeck_shape_entry(p.v / vs, dl) * (p.fwd - p.bwd), lo=0.0)]
 
     def encode(self, values: Mapping, eta: Mapping, ctx: Context) -> list[Effect]:
         """Return the fitted Stribeck effect (``fs = fc + dfs``)."""
@@ -172,3 +174,8 @@ class StribeckTerm(Term):
 
 
 TERM = StribeckTerm()
+
+
+# Python calls the kernels above through their entries: compiled ahead of time where
+# built (see motor_comp.physics.aot), else the JIT
+stribeck_shape_entry = aot.entry(stribeck_shape)
