@@ -287,6 +287,16 @@ def which_motor_comp(tree: Tree) -> str:
         f'{last_line(proc.stderr)})'
 
 
+def compiled_kernels(tree: Tree) -> str:
+    """Whether ``tree``'s kernels compiled ahead of time are in use (``physics.aot``)."""
+    code = ('from motor_comp.physics import aot\n'
+            'print("current" if aot.compiled_module() is not None else "absent or stale: '
+            'the JIT is used (python -m motor_comp.physics.aot_build)")')
+    proc = subprocess.run([sys.executable, '-c', code], cwd=tree.root, capture_output=True,
+                          text=True, env=child_env())
+    return proc.stdout.strip() if proc.returncode == 0 else 'none in this tree (the JIT)'
+
+
 @contextlib.contextmanager
 def reference_tree(rev: str) -> Iterator[Tree | None]:
     """Check out ``rev`` in a temporary detached ``git worktree`` (None if unavailable)."""
@@ -494,7 +504,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         with ref_ctx as ref:
             trees = [new] + ([ref] if ref is not None else [])
             for tree in trees:
-                print(f'{tree.label}: motor_comp from {which_motor_comp(tree)}')
+                print(f'{tree.label}: motor_comp from {which_motor_comp(tree)}; kernels '
+                      f'compiled ahead of time: {compiled_kernels(tree)}')
             startup, timings = measure(cases, trees, args.repeats)
         report(cases, trees, startup, timings, args.repeats)
     print(f'\nload average at the end {" ".join(f"{x:.2f}" for x in os.getloadavg())}; '
