@@ -179,6 +179,26 @@ def test_search_spaces_follow_the_sensor_and_the_record():
     assert all(TERMS[n].repeats_every({}) is None for n in TERMS if n != 'ripple')
 
 
+def test_a_rotary_ripple_repeats_within_a_revolution():
+    # a force that is a function of the angle repeats every turn: on an axis that turned
+    # 450 rad (HSM150's runs), no period of 225 rad is searched or started from
+    ctx = Context(present=frozenset(), eta={})
+    turns = summary(rotary=True, span=(0.0, 450.0),
+                    speeds={1: 0.1, 10: 1.0, 50: 20.0, 90: 40.0, 95: 45.0})
+    (period,) = TERMS['ripple'].space(turns, ctx)
+    assert period.hi == pytest.approx(2 * math.pi)
+    x = np.linspace(0.0, 450.0, 200_001)
+    slow = np.sin(2 * math.pi * x / 150.0)               # three "periods" over the travel
+    (start,) = TERMS['ripple'].initial(turns, ctx, (x, slow))
+    assert start['period'] <= 2 * math.pi + 1e-9
+    cogging = slow + 0.5 * np.sin(7 * x)                 # 7 per revolution
+    (start,) = TERMS['ripple'].initial(turns, ctx, (x, cogging))
+    assert start['period'] == pytest.approx(2 * math.pi / 7, rel=0.01)
+    # under a revolution of travel the two-periods rule is the tighter one
+    short = summary(rotary=True, span=(0.0, 3.0), speeds=turns.speeds)
+    assert TERMS['ripple'].space(short, ctx)[0].hi == pytest.approx(1.5)
+
+
 def test_gms_columns_times_the_levels_are_the_effects_own_law():
     """A model's GMS, micro-damping included, through its term's columns (``compare``)."""
     rng = np.random.default_rng(5)

@@ -227,7 +227,10 @@ class RippleTerm(Term):
 
     The period starts at the largest peak of the residual's spatial spectrum between
     eight position bins (or four samples per period at the high speeds) and half the
-    travel (two periods seen), and is refined by variable projection within
+    travel (two periods seen) — on a rotary axis at most one revolution: a force that is
+    a function of the angle repeats every turn, so a longer period is no ripple of this
+    axis (only of a shaft geared faster than the one measured, which the model does not
+    hold) — and is refined by variable projection within
     ``±1.5·p²/span`` (the spectrum's resolution); the harmonic count (the term's order,
     1–6, at least four samples per period at the median speed) by an information
     criterion.  It pays only if it predicts stretches of the travel it was not fitted
@@ -243,13 +246,18 @@ class RippleTerm(Term):
     def _min_period(self, s: Summary, n_bins: float = 8192.0) -> float:
         return max(8.0 * s.travel / n_bins, 4.0 * s.dt * float(s.speeds[90]), 1e-12)
 
+    @staticmethod
+    def _max_period(travel: float, rotary: bool) -> float:
+        # two periods seen; on a rotary axis one revolution at most [rad]
+        return min(travel / PERIODS_SEEN, 2.0 * math.pi) if rotary else travel / PERIODS_SEEN
+
     def space(self, s: Summary, ctx: Context) -> tuple[Param, ...]:
         """Return ``period`` [m] (no grid: the start comes from the spectrum).
 
         Up to half the travel: two periods seen tell a sinusoid from a shape along the
-        travel.
+        travel; on a rotary axis up to one revolution [rad].
         """
-        hi = max(s.travel / PERIODS_SEEN, 2.0 * self._min_period(s))
+        hi = max(self._max_period(s.travel, s.rotary), 2.0 * self._min_period(s))
         return (Param('period', self._min_period(s), hi, resolved=True),)
 
     def bracket(self, value: float, s: Summary) -> tuple[float, float]:
@@ -295,7 +303,7 @@ class RippleTerm(Term):
         x, r = profile
         spec = spatial_spectrum(x, r)
         min_p = max(8 * spec.bin_width, 4.0 * s.dt * float(s.speeds[90]))
-        max_p = spec.span / PERIODS_SEEN
+        max_p = self._max_period(spec.span, s.rotary)
         f, amp = spec.frequency, spec.amplitude
         ok = (f >= 1.0 / max_p) & (f <= 1.0 / min_p) if max_p > min_p else f < 0
         if not np.any(ok):
