@@ -22,8 +22,9 @@ $(STAMP): setup.py setup.cfg package.xml
 	touch $(STAMP)
 
 # the kernels `fit`/`diagnose` call from Python, compiled ahead of time (numba.pycc, C
-# compiler): a command then never starts numba's JIT (0.4-0.5 s of CPU each); rebuilt when
-# a source it inlines changes. If it cannot be built the commands use the JIT, as before.
+# compiler): a command then never starts numba's JIT (0.55-0.85 s of CPU a command,
+# measured); rebuilt when a source it inlines changes. If it cannot be built the
+# commands use the JIT, as before.
 AOT_STAMP = motor_comp/physics/_aot_kernels.stamp
 AOT_SOURCES = $(wildcard motor_comp/physics/*.py motor_comp/physics/effects/*.py \
                          motor_comp/workbench/*.py)
