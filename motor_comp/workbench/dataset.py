@@ -160,6 +160,7 @@ class Dataset:
         self._cache: dict = {}
         self._cache_max = max(400, COLUMN_CACHE_BYTES // (8 * max(self.n, 1)))
         self._gram: dict = {}
+        self._key_ids: dict = {}
         self._row_sets: dict = {}
         self._motions: dict = {}
         self._views: dict = {}
@@ -297,16 +298,24 @@ class Dataset:
         """
         q = len(cols)
         rid = self.rows_id(rows)
+        # each key named once by a small number: the pairs' lookups then hash three
+        # integers, not two nested key tuples (most of this method's time, q² of them)
+        ids = self._key_ids
+        if len(ids) > 100_000:
+            ids.clear()
+            self._gram.clear()
+        ks = [None if k is None else ids.setdefault(k, len(ids)) for k in keys]
+        cache = self._gram
         G = np.empty((q, q))
         missing = []
         for i in range(q):
-            ki = keys[i]
+            ki = ks[i]
             if ki is None:
                 missing.append(i)
                 continue
             for j in range(i + 1):
-                kj = keys[j]
-                v = None if kj is None else self._gram.get((rid, ki, kj))
+                kj = ks[j]
+                v = None if kj is None else cache.get((rid, ki, kj))
                 if v is None:
                     missing.append(i)
                     break
@@ -316,18 +325,18 @@ class Dataset:
             if rows is not None:
                 Z = Z[rows]
             M = Z[:, missing].T @ Z
-            if len(self._gram) > 200_000:
-                self._gram.clear()
+            if len(cache) > 200_000:
+                cache.clear()
             for a, i in enumerate(missing):
                 G[i, :] = M[a]
                 G[:, i] = M[a]
-                ki = keys[i]
+                ki = ks[i]
                 if ki is None:
                     continue
                 for j in range(q):
-                    kj = keys[j]
+                    kj = ks[j]
                     if kj is not None:
-                        self._gram[(rid, ki, kj)] = self._gram[(rid, kj, ki)] = M[a, j]
+                        cache[(rid, ki, kj)] = cache[(rid, kj, ki)] = M[a, j]
         return G
 
 
@@ -446,19 +455,28 @@ class View:
             paths = self.paths()
             for group in todo.values():
                 col0 = group[0][1]
+                # only a block's missing columns are weighted and smoothed (a ripple's
+                # order search adds one harmonic to a block whose others are cached);
+                # each column's sums are its own, so the values are the same
+                pick = [col.index for _, col in group]
                 parts = []
                 for p, path in zip(self.data.parts, paths):
                     a = np.asarray(col0.fn(path), dtype=float)
-                    if rests:
-                        keep = 1.0 - path.rest
-                        a = a * (keep[:, None] if a.ndim == 2 else keep)
-                    # a block's columns smoothed column by column: each one's values
-                    # contiguous for the design, without a copy
-                    parts.append(proc.smooth_columns_at(a, p.rows, p.W) if a.ndim == 2
-                                 else proc.smooth_at(a, p.rows, p.W))
+                    keep = 1.0 - path.rest if rests else None
+                    if a.ndim == 1:
+                        parts.append(proc.smooth_at(a if keep is None else a * keep,
+                                                    p.rows, p.W))
+                        continue
+                    # a block's columns transposed, picked and weighted in one pass: each
+                    # column's samples contiguous, as the smoother reads them and the
+                    # design takes them
+                    at = a.T if pick == list(range(a.shape[1])) else a.T[pick]
+                    at = np.ascontiguousarray(at) if keep is None else \
+                        np.multiply(at, keep, order='C')
+                    parts.append(proc.smooth_columns_at(at.T, p.rows, p.W))
                 raw = np.concatenate(parts, axis=-1)
-                for i, col in group:
-                    a = raw[col.index] if raw.ndim == 2 else raw
+                for k, (i, col) in enumerate(group):
+                    a = raw[k] if raw.ndim == 2 else raw
                     out[i] = self.data.cached(self.ckey(col, rests),
                                               lambda a=a, col=col: self._finish(col, a))
         return out  # type: ignore[return-value]

@@ -230,6 +230,26 @@ def solve_gram(G: np.ndarray, bounds: Bounds | None = None) -> tuple[np.ndarray,
     return th, sse_with(G, th)
 
 
+def solve_grams(Gs: np.ndarray) -> np.ndarray:
+    """Return the unbounded θ of a stack of augmented Grams, shape ``(k, p)``.
+
+    :func:`solve_gram` without bounds for many Grams at once: the same scaled,
+    ridged normal equations, solved by one stacked LAPACK call (the same routine, the
+    same numbers); a singular one is solved alone, as :func:`solve_gram` would.
+    """
+    Gs = np.asarray(Gs, dtype=float)
+    p = Gs.shape[-1] - 1
+    if p == 0:
+        return np.zeros((Gs.shape[0], 0))
+    A, b = Gs[:, :p, :p], Gs[:, :p, p]
+    d = np.sqrt(np.maximum(np.diagonal(A, axis1=1, axis2=2), 1e-300))
+    As = A / (d[:, :, None] * d[:, None, :])
+    try:
+        return np.linalg.solve(As + 1e-10 * np.eye(p), (b / d)[:, :, None])[:, :, 0] / d
+    except np.linalg.LinAlgError:
+        return np.stack([_unconstrained(a, v) for a, v in zip(A, b)])
+
+
 @dataclasses.dataclass(frozen=True)
 class Score:
     """Held-out result of one design."""
@@ -255,4 +275,4 @@ def bic(n_eff: float, sse0: float, sse1: float, dp: int) -> float:
 
 
 __all__ = ['Bounds', 'Score', 'bic', 'box_qp', 'cv_grams', 'linear_qp', 'solve_gram',
-           'sse_with']
+           'solve_grams', 'sse_with']

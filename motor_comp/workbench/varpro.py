@@ -42,7 +42,7 @@ from motor_comp.physics.effects import TERMS
 from motor_comp.physics.effects.identification import MASS, Param, Term
 from motor_comp.workbench.dataset import Dataset, SpeedWeights
 from motor_comp.workbench.library import Spec, context, design, values_of
-from motor_comp.workbench.lsq import bic, cv_grams, solve_gram, sse_with
+from motor_comp.workbench.lsq import bic, cv_grams, solve_gram, solve_grams, sse_with
 from motor_comp.workbench.optim import Minimum, brent_bounded, nelder_mead
 
 
@@ -501,11 +501,17 @@ def block_cv(data: Dataset, spec: Spec, name: str, model: AxisModel | None,
     held = []
     for shift in np.arange(BLOCK_SHIFTS) / BLOCK_SHIFTS:
         block = np.floor((x - x.min()) / max(length, 1e-300) + shift)
-        blocks = np.unique(block)
+        # the rows grouped by block (in their order within each): one slice per block,
+        # not a mask over every row per block (a rotary axis has hundreds of blocks)
+        order = np.argsort(block, kind='stable')
+        blocks, first = np.unique(block[order], return_index=True)
         if len(blocks) < 2:
             return BlockCV(math.inf, math.inf, math.inf)
-        G = [Z[block == b].T @ Z[block == b] for b in blocks]
-        held.append(sum(sse_with(g, solve_gram(total - g)[0]) for g in G))
+        Zs = Z[order]
+        ends = np.append(first[1:], len(order))
+        G = np.stack([Zs[a:b].T @ Zs[a:b] for a, b in zip(first, ends)])
+        th = solve_grams(total - G)
+        held.append(sum(sse_with(g, t) for g, t in zip(G, th)))
     return BlockCV(held=float(np.mean(held)), seen=float(solve_gram(total)[1]),
                    nothing=float(total[-1, -1]))
 

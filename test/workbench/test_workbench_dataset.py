@@ -48,18 +48,25 @@ def test_smoothing_at_the_rows_equals_full_rate_filtering(W, step, cols, seed):
 def test_each_row_is_summed_over_the_taps_in_order(W, cols, seed):
     """The same sum on every machine: tap by tap, as written, whichever path a row takes.
 
-    Rows in stretches of consecutive samples (summed eight side by side), rows a few
-    samples apart and isolated rows (summed one at a time) equal the plain loop bit
-    for bit; a reassociated (fast-math) sum differs from it in the last bits.
+    Rows in stretches of consecutive samples, equally spaced stretches longer than a
+    tile (summed side by side by phase) and shorter than eight rows, rows further
+    apart than the smoother, stretches that end at the record's last admissible row,
+    and isolated rows (summed one at a time) equal the plain loop bit for bit; a
+    reassociated (fast-math) sum differs from it in the last bits.
     """
     rng = np.random.default_rng(seed)
-    n = 4000
+    n = 9000
     y = rng.normal(size=(n, cols)) * 10.0 ** rng.uniform(-3, 3)
     h = W // 2
+    s = int(rng.integers(2, 10))
     rows = np.unique(np.concatenate([
         np.arange(h + 5, h + 5 + int(rng.integers(1, 40))),                 # consecutive
         np.arange(1000, 2000, int(rng.integers(2, 7))),                      # strided
-        rng.integers(2100, n - h - 1, size=int(rng.integers(0, 30)))]))      # scattered
+        np.arange(2000, 2000 + s * int(rng.integers(257, 700)), s),          # > one tile
+        np.arange(6500, 6500 + 7 * s, s),                                    # < 8 rows
+        np.arange(7000, 7000 + 12 * (W + 3), W + 3),                         # spaced > W
+        rng.integers(7600, n - h - 1, size=int(rng.integers(0, 30))),       # scattered
+        np.arange(n - h - 1 - s * int(rng.integers(8, 40)), n - h - 1, s)]))  # to the end
     b = proc.kernel(W)
     want = np.empty((len(rows), cols))
     for c in range(cols):
@@ -186,3 +193,17 @@ def test_stencil_velocity_is_the_hat_average_the_second_difference_sees(w_dt):
     # 4-point midpoint rule: error O((w·dt)⁴) against the central difference's O((w·dt)²)
     assert err < 0.02 * (w_dt ** 4) + 1e-12
     assert central > 0.05 * w_dt ** 2
+
+
+def test_a_block_with_columns_cached_smooths_only_the_new_ones(data):
+    """One harmonic more: its columns equal those of a dataset that computes all afresh."""
+    D, model = data
+    fresh = Dataset(D.kins, model)
+    eta = {'period': 0.0137, 'harmonics': 2}
+    design(D, Spec(('coulomb', 'ripple'), {'ripple': eta}), model)
+    more = Spec(('coulomb', 'ripple'), {'ripple': dict(eta, harmonics=3)})
+    got = design(D, more, model)
+    want = design(fresh, more, model)
+    assert got.labels == want.labels
+    for a, b in zip(got.cols, want.cols):
+        assert np.array_equal(a, b)

@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import lsq_linear, minimize, minimize_scalar, nnls
 
-from motor_comp.workbench.lsq import Bounds, box_qp, solve_gram
+from motor_comp.workbench.lsq import Bounds, box_qp, solve_gram, solve_grams
 from motor_comp.workbench.optim import brent_bounded, nelder_mead, next_fast_len
 
 
@@ -223,3 +223,30 @@ def test_a_constraint_that_excludes_zero_is_held_by_the_fallback(p, seed):
     # certificate, independent of any solver)
     _assert_kkt(X, y, th, C, np.array([need]))
     assert abs(float(C[0] @ th) - need) <= 1e-8 * scale
+
+
+@settings(max_examples=30, deadline=None)
+@given(p=st.integers(1, 12), k=st.integers(1, 9), seed=st.integers(0, 2**31 - 1),
+       collinear=st.booleans())
+def test_stacked_grams_solve_as_each_one_alone(p, k, seed, collinear):
+    """Many unbounded Grams at once: bit for bit what each one solved alone gives."""
+    rng = np.random.default_rng(seed)
+    Z = rng.normal(size=(40 * k, p + 1)) * 10.0 ** rng.uniform(-3, 3, size=p + 1)
+    if collinear and p > 1:
+        Z[:, 1] = 2.0 * Z[:, 0]
+    Gs = np.stack([Z[40 * i:40 * (i + 1)].T @ Z[40 * i:40 * (i + 1)] for i in range(k)])
+    th = solve_grams(Gs)
+    assert th.shape == (k, p)
+    for g, t in zip(Gs, th):
+        assert np.array_equal(t, solve_gram(g)[0])
+
+
+def test_a_singular_gram_in_a_stack_is_solved_alone():
+    """A Gram whose design has a zero column: the ridge solves it, alone as in the stack."""
+    Z = np.random.default_rng(3).normal(size=(60, 4))
+    Z[:30, 2] = 0.0
+    Gs = np.stack([Z[:30].T @ Z[:30], Z[30:].T @ Z[30:]])
+    th = solve_grams(Gs)
+    for g, t in zip(Gs, th):
+        assert np.array_equal(t, solve_gram(g)[0])
+    assert np.all(np.isfinite(th))
