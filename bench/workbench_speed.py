@@ -26,8 +26,9 @@ Every command runs as a subprocess ``python -m motor_comp.cli.main …`` of this
 interpreter, once per tree: this tree, and the reference commit (default ``608b6eb``,
 the workbench before its rebuild) checked out in a temporary ``git worktree`` and run
 with that worktree as the working directory (so ``motor_comp`` resolves to the old
-tree; printed once).  Each tree's package is byte-compiled first (``compileall``), as
-an installed package is (``make``'s setup does the same).  Numba compiles on first use
+tree; printed once).  Each tree is set up first as ``make setup`` sets it up: its
+package byte-compiled (``compileall``), and its kernels compiled ahead of time where
+the tree has ``motor_comp/physics/aot_build.py`` and they are not current.  Numba compiles on first use
 and caches: one untimed ``fit --auto`` per run and tree comes first.  The timed calls
 alternate tree by tree, and the median of ``--repeats`` calls is reported.  CPU time,
 not wall time: the machine is shared, and another process cannot inflate a child's own
@@ -332,6 +333,28 @@ def reference_tree(rev: str) -> Iterator[Tree | None]:
             tmp.rmdir()
 
 
+def prepare(tree: Tree) -> None:
+    """Set ``tree`` up as ``make setup`` does: byte-compiled, its kernels compiled ahead of time.
+
+    As installed: byte-compiled (pip compiles a regular install; an editable one compiles
+    on first import unless PYTHONDONTWRITEBYTECODE is set, as here).  A tree with
+    ``motor_comp/physics/aot_build.py`` gets its kernels built unless they are current
+    (13–140 s): a reference without them would be timed with numba's JIT, which the
+    setup of that commit did not leave in place.
+    """
+    subprocess.run([sys.executable, '-m', 'compileall', '-q', 'motor_comp'], cwd=tree.root,
+                   capture_output=True, env=child_env(), check=False)
+    if not (tree.root / 'motor_comp' / 'physics' / 'aot_build.py').is_file():
+        return
+    check = [sys.executable, '-m', 'motor_comp.physics.aot_build', '--check']
+    if subprocess.run(check, cwd=tree.root, capture_output=True, env=child_env(),
+                      check=False).returncode == 0:
+        return
+    built = subprocess.run(check[:-1], cwd=tree.root, capture_output=True, text=True,
+                           env=child_env(), check=False)
+    print(f'{tree.label}: {last_line(built.stdout + built.stderr)}')
+
+
 def measure(cases: Sequence[Case], trees: Sequence[Tree], repeats: int) \
         -> tuple[dict, dict]:
     """Time start-up and both commands on every case in every tree, alternating trees.
@@ -341,11 +364,6 @@ def measure(cases: Sequence[Case], trees: Sequence[Tree], repeats: int) \
     """
     startup: dict = {}
     timings: dict = {}
-    for tree in trees:
-        # as installed: byte-compiled (pip compiles a regular install; an editable one
-        # compiles on first import unless PYTHONDONTWRITEBYTECODE is set, as here)
-        subprocess.run([sys.executable, '-m', 'compileall', '-q', 'motor_comp'], cwd=tree.root,
-                       capture_output=True, env=child_env(), check=False)
     for tree in trees:           # warm-up: numba compiles (and caches) on first use
         for case in cases:
             _, proc = timed(tree, command('fit', case))
@@ -504,6 +522,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         with ref_ctx as ref:
             trees = [new] + ([ref] if ref is not None else [])
             for tree in trees:
+                prepare(tree)
                 print(f'{tree.label}: motor_comp from {which_motor_comp(tree)}; kernels '
                       f'compiled ahead of time: {compiled_kernels(tree)}')
             startup, timings = measure(cases, trees, args.repeats)
