@@ -28,8 +28,9 @@ the workbench before its rebuild) checked out in a temporary ``git worktree`` an
 with that worktree as the working directory (so ``motor_comp`` resolves to the old
 tree; printed once).  Each tree is set up first as ``make setup`` sets it up: its
 package byte-compiled (``compileall``), and its kernels compiled ahead of time where
-the tree has ``motor_comp/physics/aot_build.py`` and they are not current.  Numba compiles on first use
-and caches: one untimed ``fit --auto`` per run and tree comes first.  The timed calls
+the tree has ``motor_comp/physics/aot_build.py`` and they are not current.  Numba
+compiles on first use and caches: one untimed ``fit --auto`` per run and tree comes
+first.  The timed calls
 alternate tree by tree, and the median of ``--repeats`` calls is reported.  CPU time,
 not wall time: the machine is shared, and another process cannot inflate a child's own
 CPU account.
