@@ -123,8 +123,9 @@ def _smooth_rows(y, rows, b):
     # tap into a tile of rows: sample r + j - h of row r is element (r - r0)/s + j//s of
     # the stretch's phase j % s, so the samples of one tap for consecutive rows are
     # consecutive once the stretch is split into its s phases, and the tile's sums
-    # advance together in vector registers, each still over the taps in order
-    # (2.4x faster than eight strided sums side by side)
+    # advance together in vector registers, each still over the taps in order (than
+    # eight strided sums side by side: 1.6x faster compiled for a generic x86-64, 2.4x
+    # with the host's vector width under the JIT)
     nc, nr, W = y.shape[0], rows.shape[0], b.shape[0]
     n = y.shape[1]
     h = W // 2
