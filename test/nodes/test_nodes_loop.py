@@ -142,6 +142,8 @@ def _loop_wall_time(plant_log: str) -> tuple[float, int]:
 #: more slipped periods than this fraction of a run: the scheduler did not give the loop
 #: real time (SCHED_FIFO throttled, or other realtime processes on both cores)
 MAX_SLIP_FRACTION = 0.1
+#: runs of a loop that tolerates no slipped period before its bounds are skipped
+REALTIME_ATTEMPTS = 3
 
 
 def _require_real_time(slipped: int, wall: float, duration: float,
@@ -241,12 +243,20 @@ def test_realtime_pmlm_adaptive_sliding_stays_bounded(tmp_path: Path, ros_env) -
     load 15 with the plant slipping 20 periods.  Bounds: 8× lockstep (the old loop
     without priority but time-aligned still reached 0.5–1.4 mm after a stall, > 100×).
     """
-    spec, logs = _realtime_run(tmp_path, ros_env, plant='pmlm',
-                               controller='adaptive_sliding', duration=3.0)
-    wall, slipped = _loop_wall_time((tmp_path / 'plant_node.log').read_text())
     # any stall of the plant process is an open-loop interval the adaptive law reacts
     # to (measured: 7 slipped periods at load 15 gave a 0.43 mm excursion, 34× lockstep;
-    # the same stall physics as the "0.5–1.4 mm after a stall" above): no tolerance
+    # the same stall physics as the "0.5–1.4 mm after a stall" above): no tolerance.  A
+    # run the scheduler stalled is run again, up to REALTIME_ATTEMPTS runs (in CI's
+    # second part 2–4 of 3000 periods slipped in about every other run, which skipped
+    # the bounds as often)
+    for attempt in range(REALTIME_ATTEMPTS):
+        where = tmp_path / f'attempt{attempt}'
+        where.mkdir()
+        spec, logs = _realtime_run(where, ros_env, plant='pmlm',
+                                   controller='adaptive_sliding', duration=3.0)
+        wall, slipped = _loop_wall_time((where / 'plant_node.log').read_text())
+        if slipped == 0:
+            break
     _require_real_time(slipped, wall, 3.0, max_fraction=0.0)
     run = read_run(spec.output)
     assert 2990 <= len(run) <= 3000
