@@ -30,10 +30,9 @@ tree; printed once).  Each tree is set up first as ``make setup`` sets it up: it
 package byte-compiled (``compileall``), and its kernels compiled ahead of time where
 the tree has ``motor_comp/physics/aot_build.py`` and they are not current.  Numba
 compiles on first use and caches: one untimed ``fit --auto`` per run and tree comes
-first.  The timed calls
-alternate tree by tree, and the median of ``--repeats`` calls is reported.  CPU time,
-not wall time: the machine is shared, and another process cannot inflate a child's own
-CPU account.
+first.  The timed calls alternate tree by tree, and the median of ``--repeats`` calls
+is reported.  CPU time, not wall time: the machine is shared, and another process
+cannot inflate a child's own CPU account.
 
 Usage: ``python bench/workbench_speed.py [--repeats N] [--reference REV | --no-reference]``
 """
@@ -289,14 +288,18 @@ def which_motor_comp(tree: Tree) -> str:
         f'{last_line(proc.stderr)})'
 
 
+def aot_check(tree: Tree) -> subprocess.CompletedProcess:
+    """Run ``python -m motor_comp.physics.aot_build --check`` in ``tree`` (exit 0: current)."""
+    return subprocess.run([sys.executable, '-m', 'motor_comp.physics.aot_build', '--check'],
+                          cwd=tree.root, capture_output=True, text=True, env=child_env(),
+                          check=False)
+
+
 def compiled_kernels(tree: Tree) -> str:
-    """Whether ``tree``'s kernels compiled ahead of time are in use (``physics.aot``)."""
-    code = ('from motor_comp.physics import aot\n'
-            'print("current" if aot.compiled_module() is not None else "absent or stale: '
-            'the JIT is used (python -m motor_comp.physics.aot_build)")')
-    proc = subprocess.run([sys.executable, '-c', code], cwd=tree.root, capture_output=True,
-                          text=True, env=child_env())
-    return proc.stdout.strip() if proc.returncode == 0 else 'none in this tree (the JIT)'
+    """Whether ``tree``'s kernels compiled ahead of time are in use (the build's own check)."""
+    if not (tree.root / 'motor_comp' / 'physics' / 'aot_build.py').is_file():
+        return 'none in this tree (the JIT)'
+    return aot_check(tree).stdout.strip().removeprefix('compiled kernels: ')
 
 
 @contextlib.contextmanager
@@ -345,14 +348,12 @@ def prepare(tree: Tree) -> None:
     """
     subprocess.run([sys.executable, '-m', 'compileall', '-q', 'motor_comp'], cwd=tree.root,
                    capture_output=True, env=child_env(), check=False)
-    if not (tree.root / 'motor_comp' / 'physics' / 'aot_build.py').is_file():
+    if not (tree.root / 'motor_comp' / 'physics' / 'aot_build.py').is_file() \
+            or aot_check(tree).returncode == 0:
         return
-    check = [sys.executable, '-m', 'motor_comp.physics.aot_build', '--check']
-    if subprocess.run(check, cwd=tree.root, capture_output=True, env=child_env(),
-                      check=False).returncode == 0:
-        return
-    built = subprocess.run(check[:-1], cwd=tree.root, capture_output=True, text=True,
-                           env=child_env(), check=False)
+    built = subprocess.run([sys.executable, '-m', 'motor_comp.physics.aot_build'],
+                           cwd=tree.root, capture_output=True, text=True, env=child_env(),
+                           check=False)
     print(f'{tree.label}: {last_line(built.stdout + built.stderr)}')
 
 
