@@ -78,6 +78,24 @@ def spec_key(spec: Spec) -> tuple:
     return spec.names, eta, spec.mass_free, spec.mass
 
 
+def candidates(spec: Spec, data: Dataset) -> list[str]:
+    """Return the terms that can be added to ``spec`` on this data (declared needs met)."""
+    present = set(spec.names)
+    out = []
+    for n in ORDER:
+        t = TERMS[n]
+        if n in present or t.applicable(data.summary) is not None:
+            continue
+        if not set(t.requires) <= present:
+            continue
+        if t.requires_any and not set(t.requires_any) & present:
+            continue
+        if set(t.excludes) & present or any(n in TERMS[m].excludes for m in present):
+            continue
+        out.append(n)
+    return out
+
+
 def sticks(spec: Spec, data: Dataset) -> bool:
     """Whether the stuck samples at a turn carry the drive force into the friction.
 
@@ -348,7 +366,7 @@ def values_of(spec: Spec, labs: Sequence[tuple], theta: np.ndarray) -> dict:
     return vals
 
 
-__all__ = ['Design', 'ORDER', 'Spec', 'context', 'dataset_for', 'design', 'encode',
+__all__ = ['Design', 'ORDER', 'Spec', 'candidates', 'context', 'dataset_for', 'design', 'encode',
            'given_residual', 'given_sse', 'labels', 'processing_for', 'reaches_stops',
            'n_params', 'owned_columns', 'spec_key', 'spec_of', 'sticks', 'target', 'term',
            'theta_of', 'values_of', 'view_for']

@@ -35,8 +35,8 @@
   estimator.
 * **Forward** adds the supported candidate with the best held-out BIC — or the first of
   two simpler ones that together beat a flexible one with its own best simpler
-  follow-up (:func:`simpler`, two steps against two); when none pays
-  alone, two strong ones that pay together are looked for (**look-ahead**); after an
+  follow-up (two steps against two); when none pays alone, two strong ones that pay
+  together are looked for (**look-ahead**, both in :mod:`.lookahead`); after an
   addition the other terms' nonlinear parameters are searched again (**re-search**) and
   every term whose removal no longer hurts is dropped (**backward**), or replaced by a
   term its columns contain (an offset inside a spring's constant) when its own extra
@@ -77,8 +77,9 @@ from motor_comp.workbench.dataset import Dataset, model_signature
 from motor_comp.workbench.floor import Floor, noise_floor
 from motor_comp.workbench.scan import NEAR_FLOOR
 from motor_comp.workbench.derivatives import Kinematics
-from motor_comp.workbench.library import ORDER, Spec, given_sse, n_params, processing_for, \
-    spec_key, spec_of
+from motor_comp.workbench.library import Spec, candidates, given_sse, n_params, \
+    processing_for, spec_key, spec_of
+from motor_comp.workbench.lookahead import pair, simpler
 from motor_comp.workbench.lsq import bic
 from motor_comp.workbench.result import CandidateResult, Estimate, estimate
 from motor_comp.workbench.elimination import Step, backward, prune, vector as _vector
@@ -86,30 +87,9 @@ from motor_comp.workbench.varpro import cv_candidate, cv_design, refine_structur
 from motor_comp.workbench.wording import MASS, REFIT, ParameterChange, axis_units, \
     common_scale, model_scalars, params_text, scale_forces, significant_changes
 
-#: most candidates tried in pairs (the strongest by held-out BIC)
-PAIR_TOP = 3
-
 #: share of the residual above the noise floor a term must remove for the floor, not
 #: ``min_drop``, to set how far the NRMSE must fall
 MOST_OF_EXCESS = 0.5
-
-
-def candidates(spec: Spec, data: Dataset) -> list[str]:
-    """Return the terms that can be added to ``spec`` on this data (declared needs met)."""
-    present = set(spec.names)
-    out = []
-    for n in ORDER:
-        t = TERMS[n]
-        if n in present or t.applicable(data.summary) is not None:
-            continue
-        if not set(t.requires) <= present:
-            continue
-        if t.requires_any and not set(t.requires_any) & present:
-            continue
-        if set(t.excludes) & present or any(n in TERMS[m].excludes for m in present):
-            continue
-        out.append(n)
-    return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -166,6 +146,8 @@ class Engine:
         self._warm: dict = {}
         #: candidates scored, by the spec they were scored on and their name (:meth:`score`)
         self._scored: dict = {}
+        #: models after a term joined and the others were searched again (:meth:`joined`)
+        self._joined: dict = {}
         #: the given model on the rows it is judged on (the figure ``compare`` reports)
         self.given_data = self.data_for(spec_of(model))
         self.sse_given = given_sse(self.given_data, model)
@@ -238,20 +220,14 @@ class Engine:
             return False, float(explained), float(b)
         if callable(floor):
             floor = floor()
-        f = self.nrmse(floor, data) if floor > 0 else 0.0
-        if f >= self.nrmse(sse0, data):
-            # what the model leaves on its own run (the twin) is no floor of a run on
-            # which it leaves less: the twin departed from it (HSM150 without viscous
-            # friction: 15.5 % on the runs, more on its twin)
-            f = 0.0
+        f = self._floor_nrmse(sse0, data, floor)
         # the floor lowers the bar only for a term that removes most of what the
         # model leaves above the floor: far from it, a small fall is a flexible term
         # taking a bite of a structure the library lacks (a 1/rev gravity on HSM150's
         # 3.9 %, 0.25 % down, with a 0.21 % floor)
         excess = sse0 - floor
         most = excess > 0 and (sse0 - sse1) >= MOST_OF_EXCESS * excess
-        need = min(self.min_drop, (NEAR_FLOOR - 1.0) * f) if f > 0 and most \
-            else self.min_drop
+        need = self._least_fall(f) if most else self.min_drop
         fall = self.nrmse(sse0, data) - max(self.nrmse(sse1, data), f)
         ok = fall >= need
         if not ok and most and placebo is not None and explained >= MOST_OF_EXCESS:
@@ -261,6 +237,35 @@ class Engine:
             # alike: noise and the processing's error) takes what is neither
             ok = explained - placebo() >= MOST_OF_EXCESS
         return bool(ok), float(explained), float(b)
+
+    def _floor_nrmse(self, sse0: float, data: Dataset, floor: float) -> float:
+        """Return the floor's NRMSE :meth:`pays` holds a fall from ``sse0`` to (0: none)."""
+        f = self.nrmse(floor, data) if floor > 0 else 0.0
+        # what the model leaves on its own run (the twin) is no floor of a run on
+        # which it leaves less: the twin departed from it (HSM150 without viscous
+        # friction: 15.5 % on the runs, more on its twin)
+        return 0.0 if f >= self.nrmse(sse0, data) else f
+
+    def _least_fall(self, f: float) -> float:
+        """Return the least fall of the NRMSE :meth:`pays` asks of a term removing most."""
+        return min(self.min_drop, (NEAR_FLOOR - 1.0) * f) if f > 0 else self.min_drop
+
+    def can_pay(self, sse0: float, data: Dataset, *,
+                floor: float | Callable[[], float] = 0.0,
+                placebo: Callable[[], float] | None = None) -> bool:
+        """Whether any model leaving less than ``sse0`` on ``data`` could pass :meth:`pays`.
+
+        An upper bound, for work whose only use is a verdict (a re-search, a
+        look-ahead's second step): the largest fall :meth:`pays` can see is to the
+        floor, against the smallest fall it asks.  With a ``placebo`` the run may refute
+        the floor, which no bound settles: True.
+        """
+        if placebo is not None:
+            return True
+        if callable(floor):
+            floor = floor()
+        f = self._floor_nrmse(sse0, data, floor)
+        return self.nrmse(sse0, data) - f >= self._least_fall(f)
 
     def h0(self, model: AxisModel) -> Estimate:
         """Refit the model's own terms, every parameter (nonlinear ones re-searched)."""
@@ -291,6 +296,19 @@ class Engine:
             hit = self._scored[key] = self._score(base, name)
         return hit
 
+    def joined(self, cand: CandidateResult) -> Estimate:
+        """Return the model ``cand`` makes when the forward step takes it (:func:`research`).
+
+        The look-ahead (:func:`simpler`, :func:`pair`) scores a candidate's follow-ups on
+        the model the step would make, so the round after the step finds them scored.
+        """
+        key = spec_key(cand.spec)
+        hit = self._joined.get(key)
+        if hit is None:
+            new = estimate(self.data_for(cand.spec), cand.spec, cand.model)
+            hit = self._joined[key] = research(self, new, cand.effect)
+        return hit
+
     def _score(self, base: Estimate, name: str) -> CandidateResult:
         D = self.data_for(base.spec.with_(name, {}))
         sse0 = base.sse_cv if D is self.data_for(base.spec) else \
@@ -310,10 +328,12 @@ class Engine:
         ok, explained, b = self.pays(sse0, sse, dp, D, floor=floor, placebo=null)
         why_not = est.inadmissible.get(name, '')
         if not ok and not why_not and explained >= self.min_gain and any(
-                TERMS[n].params and not _vector(TERMS[n], D) for n in base.spec.names):
+                TERMS[n].params and not _vector(TERMS[n], D) for n in base.spec.names) \
+                and self.can_pay(sse0, D, floor=floor, placebo=null):
             # its gain is judged at the model's best nonlinear parameters with it, not
             # at those chosen without it: a viscous slope under a Stribeck curve whose
             # vs and delta had stretched to imitate it pays only once they move back
+            # (not searched when no fall could pay: the model is within its floor)
             full = research(self, estimate(D, spec, base.model), name)
             if full.sse_cv < sse:
                 ok2, explained2, b2 = self.pays(sse0, full.sse_cv, dp, D, floor=floor,
@@ -434,7 +454,7 @@ def select(eng: Engine, est: Estimate, step: Step, say: Callable[[str], None],
         if not new.sse_cv < base_sse:
             say(f'{best.effect}: the held-out error did not fall: stopping')
             break
-        est = research(eng, new, best.effect)
+        est = eng.joined(best)
         step(best.effect, 'add', est, '')
         est = backward(eng, est, best.effect, step, removed_once)
     return prune(eng, restructure(eng, est, step), step)
@@ -461,87 +481,6 @@ def restructure(eng: Engine, est: Estimate, step: Step) -> Estimate:
             step(REFIT, REFIT, est, f'{n} searched again against the final model: '
                  + params_text(est, n, eng.units))
     return est
-
-
-def simpler(eng: Engine, est: Estimate, best: CandidateResult,
-            scored: Sequence[CandidateResult]) -> CandidateResult:
-    """Return a simpler candidate when it and a second simple one together beat the best.
-
-    A flexible term (many parameters) can take the shape of two simple ones at once:
-    friction knots along the travel are, on a sine, also a function of the speed, and
-    win a greedy step against a viscous term and a Stribeck curve that the run shows
-    together.  Each of the two strongest supported candidates with fewer parameters is
-    fitted in turn and every other candidate with fewer parameters than the flexible
-    one is scored on top of it — also those that did not pay alone: a Stribeck rise
-    does not, before the viscous slope it sits on is in the model.  The flexible term
-    gets the same look-ahead (two steps against two: its best supported follow-up
-    among the same lighter candidates), and when a pair improves the held-out BIC more,
-    its first term is taken (the second is judged in the next step).  Judged one step
-    against two, an offset and a Coulomb level beat a direction asymmetry (which holds
-    the offset) on HSM150's four runs, and the asymmetry's viscous part, left for a
-    later step, no longer paid.
-    """
-    lighter = sorted((c for c in scored if c.supported and c.n_params < best.n_params),
-                     key=lambda c: c.bic_delta)[:2]
-    if not lighter:
-        return best
-    # a term's parameter count as this round scored it
-    size = {c.effect: c.n_params for c in scored}
-
-    def follow_up(a: CandidateResult, skip: str) -> float:
-        first = estimate(eng.data_for(a.spec), a.spec, a.model)
-        gains = [0.0]
-        for n in candidates(first.spec, eng.data):
-            if n == skip or size.get(n, best.n_params) >= best.n_params:
-                continue
-            second = eng.score(first, n)
-            if second.supported:
-                gains.append(second.bic_delta)
-        return a.bic_delta + min(gains)
-    choice, total = best, follow_up(best, best.effect)
-    for a in lighter:
-        t = follow_up(a, best.effect)
-        if t < total:
-            choice, total = a, t
-    return choice
-
-
-def pair(eng: Engine, est: Estimate, scored: Sequence[CandidateResult]) \
-        -> CandidateResult | None:
-    """Return the first of two effects that pay together when neither pays alone.
-
-    Each strong candidate — the held-out gain every candidate must show (``min_gain``),
-    the BIC improving, in its domain — is fitted in and the others are scored on top
-    of it (the three strongest; half the residual, asked before, left a Stribeck rise
-    at 49.8 % and a dead time unpaired on a speed sweep); the pair is taken
-    when the second then pays and the two together pay against the current model for
-    both their parameters (a Stribeck curve and a dead time on a speed sweep each hide
-    the other's worth).
-    """
-    strong = sorted((c for c in scored if not c.supported and not c.why_not
-                     and c.explained >= eng.min_gain and c.bic_delta < 0),
-                    key=lambda c: c.bic_delta)[:PAIR_TOP]
-    best = None
-    for c in strong:
-        first = estimate(eng.data_for(c.spec), c.spec, c.model)
-        for n in candidates(first.spec, eng.data):
-            other = next((s for s in scored if s.effect == n), None)
-            if other is None or other.why_not or other.explained < eng.min_gain \
-                    or other.bic_delta >= 0:
-                continue
-            second = eng.score(first, n)
-            if not second.supported:
-                continue
-            D = eng.data_for(second.spec)
-            sse = (first.sse_cv if D is eng.data_for(first.spec) else
-                   cv_design(D, first.spec, first.model)[0]) * (1.0 - second.explained)
-            sse0 = est.sse_cv if D is eng.data_for(est.spec) else \
-                cv_design(D, est.spec, est.model)[0]
-            dp = n_params(second.spec) - n_params(est.spec)
-            ok, _, b = eng.pays(sse0, sse, dp, D, floor=lambda: eng.floor_sse(est, D))
-            if ok and (best is None or b < best[0]):
-                best = (b, c)
-    return None if best is None else best[1]
 
 
 def research(eng: Engine, est: Estimate, just: str) -> Estimate:

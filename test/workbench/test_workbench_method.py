@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from motor_comp.errors import ParameterError
 from motor_comp.logs.run import Run
@@ -120,6 +121,58 @@ def test_one_question_one_answer_a_candidate_scored_twice(sweep_kin):
     base = estimate(eng.data_for(first.spec), first.spec, first.model)
     assert eng.score(base, 'viscous').effect == 'viscous'
     assert eng.score(base, 'viscous') is not eng.score(h0, 'viscous')
+
+
+@pytest.fixture(scope='module')
+def sweep_engine(sweep_kin):
+    from motor_comp.workbench.selection import Engine
+    bare = AxisModel(mass=2 * PMLM.mass, input_gain=PMLM.input_gain)
+    return Engine([sweep_kin], bare, folds=8, min_gain=0.1)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(1e-4, 1.0), st.floats(0.0, 1.0), st.floats(0.0, 2.0), st.integers(1, 12))
+def test_can_pay_bounds_the_paying_rule(sweep_engine, n0, share, floor_share, dp):
+    """No SSE below ``sse0`` passes :meth:`Engine.pays` where :meth:`Engine.can_pay` says none can.
+
+    The bound is what lets the selection skip a re-search or a look-ahead's second
+    step without changing a verdict; it must hold for every fall and every floor.
+    """
+    eng = sweep_engine
+    D = eng.data
+    sse0 = n0 ** 2 * D.den    # the NRMSE the model leaves: n0
+    sse1, floor = share * sse0, floor_share * sse0
+    if eng.pays(sse0, sse1, dp, D, floor=floor)[0]:
+        assert eng.can_pay(sse0, D, floor=floor)
+
+
+def test_can_pay_refuses_a_model_at_its_floor_and_not_one_far_above(sweep_engine):
+    eng = sweep_engine
+    D = eng.data
+    n0 = 0.05   # 5 % NRMSE left
+    sse0 = n0 ** 2 * D.den
+    # a floor within NEAR_FLOOR-1 of the NRMSE leaves no fall the rule asks
+    assert not eng.can_pay(sse0, D, floor=(0.99 * n0) ** 2 * D.den)
+    assert not eng.pays(sse0, 0.0, 1, D, floor=(0.99 * n0) ** 2 * D.den)[0]
+    assert eng.can_pay(sse0, D, floor=(0.2 * n0) ** 2 * D.den)
+    assert eng.can_pay(sse0, D, floor=0.0)
+    # the run may refute a floor: a placebo makes no bound
+    assert eng.can_pay(sse0, D, floor=(0.99 * n0) ** 2 * D.den, placebo=lambda: 0.0)
+
+
+def test_the_look_ahead_scores_on_the_model_the_step_makes(sweep_engine):
+    """A candidate joined once is one model: the look-ahead's and the forward step's."""
+    from motor_comp.workbench.selection import research
+    eng = sweep_engine
+    h0 = eng.h0(eng.model)
+    cand = eng.score(h0, 'coulomb')
+    joined = eng.joined(cand)
+    assert eng.joined(cand) is joined
+    fresh = research(eng, estimate(eng.data_for(cand.spec), cand.spec, cand.model), 'coulomb')
+    assert fresh.spec == joined.spec and fresh.sse_cv == joined.sse_cv
+    follow = eng.score(joined, 'viscous')
+    assert eng.score(estimate(eng.data_for(joined.spec), joined.spec, joined.model),
+                     'viscous') is follow
 
 
 def test_standard_errors_cover_the_truth_under_coloured_noise():
