@@ -280,6 +280,13 @@ def test_compiled_basis_equals_the_array_form_bit_for_bit():
         ref += (h * t * s * s)[:, None] * S[lo] - (h * t * t * s)[:, None] * S[hi]
         B = _pf(knots, np.zeros(n)).basis(x)
         assert np.array_equal(B, ref) and np.array_equal(np.signbit(B), np.signbit(ref))
+        # the identification's block: knots from the second, times the direction share,
+        # column-major (each column's samples contiguous, as the smoother reads them)
+        d = np.where(np.arange(len(x)) % 3 == 0, -1.0, rng.uniform(0.0, 1.0, len(x)))
+        C = _pf(knots, np.zeros(n)).basis(x, d, first=1)
+        want = ref[:, 1:] * d[:, None]
+        assert C.shape == (len(x), n - 1) and C.T.flags.c_contiguous
+        assert np.array_equal(C, want) and np.array_equal(np.signbit(C), np.signbit(want))
 
 
 def test_regressors_are_basis_times_direction():

@@ -121,17 +121,22 @@ def position_friction_dfc(x, knots, values, slopes):
     return out
 
 
-@aot.ahead(aot.F8_1D, aot.F8_1D, aot.I8_1D, aot.array(2, readonly=True))
+@aot.ahead(aot.F8_1D, aot.F8_1D, aot.I8_1D, aot.array(2, readonly=True), aot.F8_1D, aot.I8)
 @njit(cache=True)
-def _hermite_basis(t, h, lo, slopes):
-    """Rows of :meth:`PositionFriction.basis`: cubic Hermite weights of every knot value.
+def _hermite_basis(t, h, lo, slopes, sign, first):
+    """Columns of :meth:`PositionFriction.basis`, transposed: one row per knot from ``first``.
 
-    Row ``i`` lies in the interval ``lo[i]`` (length ``h[i]``, local coordinate
+    Sample ``i`` lies in the interval ``lo[i]`` (length ``h[i]``, local coordinate
     ``t[i]``): the end values' weights at ``lo``/``lo + 1`` plus the slopes' weights
-    through ``m = S·dfc``, each product in the order the array form took them.
+    through ``m = S·dfc``, each product in the order the array form took them; times
+    ``sign[i]`` when ``sign`` is not empty.  Written knot by knot (each knot's samples
+    contiguous), as the workbench's smoother reads a block of columns: transposing and
+    multiplying an n × knots array afterwards cost more than the weights.
     """
     n, k = t.shape[0], slopes.shape[0]
-    out = np.zeros((n, k))
+    out = np.empty((k - first, n))
+    w = np.empty(k)
+    signed = sign.shape[0] > 0
     for i in range(n):
         ti = t[i]
         si = 1.0 - ti
@@ -140,11 +145,21 @@ def _hermite_basis(t, h, lo, slopes):
         j0 = lo[i]
         for j in range(k):
             # 0.0 + …: the array form added into zeros (a −0.0 product becomes +0.0)
-            out[i, j] = 0.0 + (a * slopes[j0, j] - b * slopes[j0 + 1, j])
+            w[j] = 0.0 + (a * slopes[j0, j] - b * slopes[j0 + 1, j])
         # the end values' weights: the array form assigned them into zeros, then added
-        out[i, j0] = (1.0 + 2.0 * ti) * si * si + out[i, j0]
-        out[i, j0 + 1] = ti * ti * (3.0 - 2.0 * ti) + out[i, j0 + 1]
+        w[j0] = (1.0 + 2.0 * ti) * si * si + w[j0]
+        w[j0 + 1] = ti * ti * (3.0 - 2.0 * ti) + w[j0 + 1]
+        if signed:
+            for j in range(first, k):
+                out[j - first, i] = w[j] * sign[i]
+        else:
+            for j in range(first, k):
+                out[j - first, i] = w[j]
     return out
+
+
+#: no sign: :func:`_hermite_basis` returns the weights themselves
+_NO_SIGN = np.zeros(0)
 
 
 def slope_matrix(knots: np.ndarray) -> np.ndarray:
@@ -277,19 +292,24 @@ class PositionFriction(Effect):
         v = np.asarray(v, dtype=float)
         return self.level(x.ravel()).reshape(np.shape(x)) * np.sign(v)
 
-    def basis(self, x: np.ndarray) -> np.ndarray:
+    def basis(self, x: np.ndarray, sign: np.ndarray | None = None, *,
+              first: int = 0) -> np.ndarray:
         """Return the spline's basis functions ``b_j`` at ``x``: ``dfc(x) = B @ dfc``.
 
         ``B`` has one row per position and one column per knot (n × n_knots).
         Column ``j`` is the spline through the unit values ``e_j`` (same knots, same
         clamped ends, constant beyond them): the identification's columns for the
         knot values.  The columns sum to 1 at every ``x`` (a constant ``dfc`` is a
-        Coulomb level).
+        Coulomb level).  Column-major (each column's samples contiguous).
 
         Parameters
         ----------
         x : ndarray
             Positions [m], any shape (flattened).
+        sign : ndarray, optional
+            A factor per position (the direction of motion): ``B`` times it, row by row.
+        first : int
+            The first knot whose column is returned (the columns before it are left out).
         """
         x = np.asarray(x, dtype=float).ravel()
         knots = self.knots
@@ -303,11 +323,13 @@ class PositionFriction(Effect):
         # the Hermite weights of spline_sum: the values at lo/hi and, through the
         # slopes m = S·dfc, every knot value (compiled: one pass over the n × knots
         # output instead of eight array passes, 0.3 s of a 60 s run's fit)
-        return _hermite_basis_entry(t, h, lo, np.ascontiguousarray(slopes))
+        sign = _NO_SIGN if sign is None else np.ascontiguousarray(sign, dtype=float)
+        return _hermite_basis_entry(t, h, lo, np.ascontiguousarray(slopes), sign,
+                                    int(first)).T
 
     def regressors(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Columns ``b_j(x)·sgn(v)``; coefficients ``dfc_j`` [N]."""
-        return self.basis(x) * np.sign(np.asarray(v, dtype=float).ravel())[:, None]
+        return self.basis(x, np.sign(np.asarray(v, dtype=float).ravel()))
 
     @property
     def lowest(self) -> tuple[float, float]:
@@ -422,7 +444,7 @@ class PositionFrictionTerm(Term):
         pf = PositionFriction(x=knots, dfc=(0.0,) * len(knots))
 
         def block(p: Any) -> np.ndarray:
-            return pf.basis(p.x)[:, 1:] * (p.fwd - p.bwd)[:, None]
+            return pf.basis(p.x, p.fwd - p.bwd, first=1)
         return [Column(f'dfc{j}', ('position_friction', knots, j), block,
                        width=len(knots) - 1, index=j - 1) for j in range(1, len(knots))]
 
