@@ -11,8 +11,10 @@ term and reads only its declarations:
 2. **local**: one free scalar by a bounded Brent search between the grid cells around
    the best trial (or the term's bracket); several by Nelder–Mead on the (log)
    parameters, clipped to the bounds;
-3. **order**: a term with a structural order (ripple harmonics) takes the count with the
-   best information criterion, and is refined again if it changed;
+3. **order**: a term with a structural order (ripple harmonics, knots) takes the count
+   with the best information criterion — scored on a geometric ladder of counts
+   (:func:`.optim.order_ladder`), then every count between the best's neighbours on
+   it — and is refined again if it changed;
 4. **vector parameters** (the GMS element distances, one element per column): a common
    scale first (all a screen needs); for a candidate past the screen every element
    freed, elements whose coefficient ends at its bound or that do not pay for their two
@@ -25,7 +27,7 @@ Choices made from data are made inside each validation fold when a held-out scor
 wanted (:func:`cv_candidate`): each fold takes, on its own training rows, the best of
 the grid and a neighbourhood of the all-data choice.  A term that claims to repeat
 along the travel (``Term.repeats_every``: the ripple) is first held to that claim on
-stretches of the travel it was not fitted on (:func:`block_cv`); one that does not
+stretches of the travel it was not fitted on (:func:`.repeats.block_cv`); one that does not
 repeat has no held-out gain.
 """
 from __future__ import annotations
@@ -39,11 +41,12 @@ import numpy as np
 
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import TERMS
-from motor_comp.physics.effects.identification import MASS, Param, Term
+from motor_comp.physics.effects.identification import Param, Term
 from motor_comp.workbench.dataset import Dataset, SpeedWeights
 from motor_comp.workbench.library import Spec, context, design, values_of
-from motor_comp.workbench.lsq import bic, cv_grams, solve_gram, solve_grams, sse_with
-from motor_comp.workbench.optim import Minimum, brent_bounded, nelder_mead
+from motor_comp.workbench.lsq import bic, cv_grams, solve_gram, sse_with
+from motor_comp.workbench.optim import Minimum, brent_bounded, nelder_mead, order_ladder
+from motor_comp.workbench.repeats import REPEATS, block_cv
 
 
 def searched(t: Term) -> bool:
@@ -220,15 +223,25 @@ class Search:
         return new if self.cost(new) <= f0 else eta
 
     def _order(self, eta: dict, lo: int, hi: int) -> dict:
+        # the orders on a geometric ladder (and the one ``eta`` has), then every order
+        # between the best's neighbours on it: a count's worth changes slowly with the
+        # count, so a wide range (the knots of a friction along the travel, 4-32: each
+        # trial a new block of up to 31 columns) is not scored count by count
         n_eff = _n_eff(self.data, self.rows)
-        best = None
-        for k in range(lo, hi + 1):
-            e = self.term.with_order(eta, k)
-            s = self.cost(e)
-            crit = n_eff * math.log(max(s, 1e-300)) + 2 * k * math.log(n_eff)
-            if best is None or crit < best[0]:
-                best = (crit, e)
-        return best[1]
+        crit: dict = {}
+
+        def score(k: int) -> None:
+            if k not in crit:
+                e = self.term.with_order(eta, k)
+                s = self.cost(e)
+                crit[k] = (n_eff * math.log(max(s, 1e-300)) + 2 * k * math.log(n_eff), e)
+        ladder = order_ladder(lo, hi, self.term.order_of(eta))
+        for k in ladder:
+            score(k)
+        i = min(range(len(ladder)), key=lambda j: (crit[ladder[j]][0], ladder[j]))
+        for k in range(ladder[max(i - 1, 0)] + 1, ladder[min(i + 1, len(ladder) - 1)]):
+            score(k)
+        return crit[min(crit, key=lambda k: (crit[k][0], k))][1]
 
     # -- vector parameters -------------------------------------------------------------
     def _vector(self, eta: dict, vp: Param, refine: bool) -> dict:
@@ -453,69 +466,6 @@ def fold_trials(data: Dataset, spec: Spec, name: str, eta_all: Mapping) -> list[
     return list(uniq.values())
 
 
-#: partitions of the travel into blocks, each shifted by 1/BLOCK_SHIFTS of a block: a
-#: shape cut by a block's edge in one partition is whole in another
-BLOCK_SHIFTS = 4
-#: share of what a term explains on the stretches it was fitted on that it must also
-#: explain on stretches it did not see, to count as repeating along the travel.  On the
-#: generator's runs: the true ripples 95–100 % (13 complete cases, at their final fit);
-#: bumps the library lacks drawn by harmonics 23 % (linear) and 52 % (rotary, with
-#: gravity's sin/cos helping)
-REPEATS = 0.75
-
-
-@dataclasses.dataclass(frozen=True)
-class BlockCV:
-    """A term's SSE on position blocks: held out, seen (fitted on all), and without it."""
-
-    held: float
-    seen: float
-    nothing: float
-
-    @property
-    def repeats(self) -> bool:
-        """Whether the held-out gain is at least :data:`REPEATS` of the seen gain."""
-        return self.nothing - self.held >= REPEATS * (self.nothing - self.seen) > 0.0
-
-
-def block_cv(data: Dataset, spec: Spec, name: str, model: AxisModel | None,
-             length: float) -> BlockCV:
-    """Return how well term ``name`` predicts blocks of ``length`` along the travel.
-
-    The spec is fitted on all rows and the other terms' share is taken off the target;
-    the term's own columns, fitted to that on all blocks but one, predict that one,
-    over :data:`BLOCK_SHIFTS` partitions of the travel shifted by a fraction of a block
-    (:class:`BlockCV`: the mean held-out SSE, the SSE fitted on all, and the SSE of
-    predicting nothing).  A force periodic in position fitted on some periods predicts
-    the others; a shape at one place (a bump) does not.  The other terms are not
-    refitted per block: a spring fitted without the end of the travel would mispredict
-    it for reasons of its own.  All ``inf`` under two blocks.
-    """
-    d = design(data, spec, model)
-    x = d.view.gather(lambda p, mo: mo.x)
-    th, _ = solve_gram(d.gram(), d.bounds)
-    own = np.array([lab != MASS and lab[0] == name for lab in d.labels], dtype=bool)
-    r = d.y - d.X[:, ~own] @ th[~own]
-    Z = np.column_stack([d.X[:, own], r])
-    total = Z.T @ Z
-    held = []
-    for shift in np.arange(BLOCK_SHIFTS) / BLOCK_SHIFTS:
-        block = np.floor((x - x.min()) / max(length, 1e-300) + shift)
-        # the rows grouped by block (in their order within each): one slice per block,
-        # not a mask over every row per block (a rotary axis has hundreds of blocks)
-        order = np.argsort(block, kind='stable')
-        blocks, first = np.unique(block[order], return_index=True)
-        if len(blocks) < 2:
-            return BlockCV(math.inf, math.inf, math.inf)
-        Zs = Z[order]
-        ends = np.append(first[1:], len(order))
-        G = np.stack([Zs[a:b].T @ Zs[a:b] for a, b in zip(first, ends)])
-        th = solve_grams(total - G)
-        held.append(sum(sse_with(g, t) for g, t in zip(G, th)))
-    return BlockCV(held=float(np.mean(held)), seen=float(solve_gram(total)[1]),
-                   nothing=float(total[-1, -1]))
-
-
 def cv_design(data: Dataset, spec: Spec, model: AxisModel | None,
               weights: SpeedWeights | None = None) -> tuple[float, float]:
     """Return the held-out and in-sample SSE of ``spec`` (bounded least squares)."""
@@ -594,5 +544,5 @@ def cv_candidate(data: Dataset, spec: Spec, name: str, model: AxisModel | None, 
     return CandidateCV(cv_choices(data, [spec.with_(name, e) for e in trials], model), eta_all)
 
 
-__all__ = ['BlockCV', 'CandidateCV', 'Search', 'block_cv', 'searched', 'cv_candidate',
-           'cv_choices', 'cv_design', 'fold_trials', 'refine_structure', 'search', 'vp_sse']
+__all__ = ['CandidateCV', 'Search', 'cv_candidate', 'cv_choices', 'cv_design',
+           'fold_trials', 'refine_structure', 'search', 'searched', 'vp_sse']

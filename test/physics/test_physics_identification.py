@@ -173,7 +173,7 @@ def test_search_spaces_follow_the_sensor_and_the_record():
     assert period.hi == pytest.approx(s.travel / 2)              # two periods seen
     assert math.isfinite(period.lo) and period.lo > 0
     # two periods seen, harmonics too: a ripple must repeat on the periods it was not
-    # fitted on (varpro.block_cv), a shape at one place does not
+    # fitted on (repeats.block_cv), a shape at one place does not
     assert TERMS['ripple'].orders(s, {'period': 0.45 * s.travel})[1] > 1
     assert TERMS['ripple'].repeats_every({'period': 0.02}) == pytest.approx(0.02)
     assert all(TERMS[n].repeats_every({}) is None for n in TERMS if n != 'ripple')

@@ -16,7 +16,8 @@ from hypothesis import strategies as st
 from scipy.optimize import lsq_linear, minimize, minimize_scalar, nnls
 
 from motor_comp.workbench.lsq import Bounds, box_qp, solve_gram, solve_grams
-from motor_comp.workbench.optim import brent_bounded, nelder_mead, next_fast_len
+from motor_comp.workbench.optim import ORDER_RATIO, brent_bounded, nelder_mead, \
+    next_fast_len, order_ladder
 
 
 def _bumpy(a: float, b: float, c: float):
@@ -71,6 +72,55 @@ def test_nelder_mead_finds_a_bowls_minimum():
     got = nelder_mead(f, sim, xatol=1e-8, fatol=1e-14, maxiter=5000)
     np.testing.assert_allclose(got.x, c, atol=1e-5)
     assert got.fun < 1e-9
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(0, 40), st.integers(0, 60), st.one_of(st.none(), st.integers(-5, 100)))
+def test_order_ladder_spans_the_range_geometrically(lo, span, at):
+    hi = lo + span
+    L = order_ladder(lo, hi, at)
+    assert L == sorted(set(L)) and L[0] == lo and L[-1] == hi
+    assert all(lo <= k <= hi for k in L)
+    if at is not None and lo <= at <= hi:
+        assert at in L
+    # every count up to 5 is on it, and no step is wider than the ratio allows
+    assert all(k in L for k in range(lo, min(hi, 5) + 1))
+    for a, b in zip(L, L[1:]):
+        assert b <= max(a + 1, math.ceil(ORDER_RATIO * a) + 1), (a, b)
+
+
+def _order_search(crit_of):
+    """A Search whose cost makes the information criterion of order k ``crit_of(k)``."""
+    from types import SimpleNamespace
+    from motor_comp.workbench.varpro import Search
+    n_eff = 100.0
+    s = object.__new__(Search)
+    s.data, s.rows = SimpleNamespace(n_eff=n_eff), None
+    s.term = SimpleNamespace(with_order=lambda eta, k: dict(eta, k=k),
+                             order_of=lambda eta: eta.get('k'))
+    s.scored = []
+
+    def cost(e):
+        k = e['k']
+        s.scored.append(k)
+        return math.exp((crit_of(k) - 2 * k * math.log(n_eff)) / n_eff)
+    s.cost = cost
+    return s
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(1, 8), st.integers(0, 40), st.floats(0.0, 1.0), st.floats(0.1, 20.0),
+       st.floats(0.1, 20.0))
+def test_order_search_finds_a_unimodal_criterions_best_with_fewer_trials(
+        lo, span, where, left, right):
+    hi = lo + span
+    best = lo + round(where * span)
+    s = _order_search(lambda k: left * (best - k) if k <= best else right * (k - best))
+    got = s._order({'k': lo}, lo, hi)['k']
+    assert got == best
+    assert len(set(s.scored)) <= span + 1
+    if span >= 28:
+        assert len(set(s.scored)) <= 0.7 * (span + 1)
 
 
 @pytest.mark.parametrize('n', [1, 2, 7, 97, 1000, 4097, 65537, 199999])

@@ -344,7 +344,7 @@ class Term:
         A structure periodic in position claims that what it fits on some stretches of
         the travel repeats on the others: it pays only when, fitted without each block
         of this length [m or rad], it predicts that block
-        (:func:`~motor_comp.workbench.varpro.block_cv`), so a shape at one place (a bump
+        (:func:`~motor_comp.workbench.repeats.block_cv`), so a shape at one place (a bump
         the library lacks) is not taken for it.  None: no such claim.
         """
         return None
