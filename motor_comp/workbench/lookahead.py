@@ -39,13 +39,12 @@ def simpler(eng: Engine, est: Estimate, best: CandidateResult,
     parameters searched again, :meth:`.selection.Engine.joined`), and every other
     candidate with fewer parameters than the flexible one is scored on top of it — also
     those that did not pay alone: a Stribeck rise does not, before the viscous slope it
-    sits on is in the model.  The flexible term
-    gets the same look-ahead (two steps against two: its best supported follow-up
-    among the same lighter candidates), and when a pair improves the held-out BIC more,
-    its first term is taken (the second is judged in the next step).  Judged one step
-    against two, an offset and a Coulomb level beat a direction asymmetry (which holds
-    the offset) on HSM150's four runs, and the asymmetry's viscous part, left for a
-    later step, no longer paid.
+    sits on is in the model.  The flexible term gets the same look-ahead (two steps
+    against two: its best supported follow-up among the same lighter candidates), and
+    when a pair improves the held-out BIC more, its first term is taken (the second is
+    judged in the next step).  Judged one step against two, an offset and a Coulomb
+    level beat a direction asymmetry (which holds the offset) on HSM150's four runs, and
+    the asymmetry's viscous part, left for a later step, no longer paid.
     """
     lighter = sorted((c for c in scored if c.supported and c.n_params < best.n_params),
                      key=lambda c: c.bic_delta)[:2]

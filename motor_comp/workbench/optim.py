@@ -7,8 +7,7 @@ the tests compare against them): importing ``scipy.optimize`` pulls in ``scipy.l
 every ``fit`` and ``diagnose``, half the 0.33 s a whole ``diagnose`` of a 20 s run may
 take by the speed goal of issue 22.  Only what the workbench asks of them is provided:
 a bounded scalar search to an absolute tolerance, and a simplex search from a given
-simplex to absolute tolerances on the points and the costs.  And, for an integer order
-(a count of harmonics or knots), the ladder of counts a search scores first.
+simplex to absolute tolerances on the points and the costs.
 
 References: R. P. Brent, *Algorithms for Minimization without Derivatives* (1973), ch. 5;
 G. E. Forsythe, M. A. Malcolm, C. B. Moler, *Computer Methods for Mathematical
@@ -182,26 +181,4 @@ def next_fast_len(n: int) -> int:
         n += 1
 
 
-#: ratio of successive orders on the ladder of :meth:`Search._order` (every order up
-#: to 5 is on it)
-ORDER_RATIO = 1.25
-
-
-def order_ladder(lo: int, hi: int, at: int | None = None) -> list[int]:
-    """Return the orders from ``lo`` to ``hi`` a structural order search scores first.
-
-    ``lo`` times powers of :data:`ORDER_RATIO`, rounded, ``hi``, and ``at`` (the order a
-    start already has) when within the range; ascending, each once.
-    """
-    out = {lo, hi}
-    k = float(max(lo, 1))
-    while k < hi:
-        out.add(int(round(k)))
-        k *= ORDER_RATIO
-    if at is not None and lo <= at <= hi:
-        out.add(int(at))
-    return sorted(o for o in out if lo <= o <= hi)
-
-
-__all__ = ['Minimum', 'ORDER_RATIO', 'brent_bounded', 'nelder_mead', 'next_fast_len',
-           'order_ladder']
+__all__ = ['Minimum', 'brent_bounded', 'nelder_mead', 'next_fast_len']

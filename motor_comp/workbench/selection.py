@@ -299,8 +299,8 @@ class Engine:
     def joined(self, cand: CandidateResult) -> Estimate:
         """Return the model ``cand`` makes when the forward step takes it (:func:`research`).
 
-        The look-ahead (:func:`simpler`, :func:`pair`) scores a candidate's follow-ups on
-        the model the step would make, so the round after the step finds them scored.
+        The look-ahead (:func:`.lookahead.simpler`) scores a candidate's follow-ups on the
+        model the step would make, so the round after the step finds them scored.
         """
         key = spec_key(cand.spec)
         hit = self._joined.get(key)

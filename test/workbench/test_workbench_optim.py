@@ -16,8 +16,7 @@ from hypothesis import strategies as st
 from scipy.optimize import lsq_linear, minimize, minimize_scalar, nnls
 
 from motor_comp.workbench.lsq import Bounds, box_qp, solve_gram, solve_grams
-from motor_comp.workbench.optim import ORDER_RATIO, brent_bounded, nelder_mead, \
-    next_fast_len, order_ladder
+from motor_comp.workbench.optim import brent_bounded, nelder_mead, next_fast_len
 
 
 def _bumpy(a: float, b: float, c: float):
@@ -74,21 +73,6 @@ def test_nelder_mead_finds_a_bowls_minimum():
     assert got.fun < 1e-9
 
 
-@settings(max_examples=300, deadline=None)
-@given(st.integers(0, 40), st.integers(0, 60), st.one_of(st.none(), st.integers(-5, 100)))
-def test_order_ladder_spans_the_range_geometrically(lo, span, at):
-    hi = lo + span
-    L = order_ladder(lo, hi, at)
-    assert L == sorted(set(L)) and L[0] == lo and L[-1] == hi
-    assert all(lo <= k <= hi for k in L)
-    if at is not None and lo <= at <= hi:
-        assert at in L
-    # every count up to 5 is on it, and no step is wider than the ratio allows
-    assert all(k in L for k in range(lo, min(hi, 5) + 1))
-    for a, b in zip(L, L[1:]):
-        assert b <= max(a + 1, math.ceil(ORDER_RATIO * a) + 1), (a, b)
-
-
 def _order_search(crit_of):
     """A Search whose cost makes the information criterion of order k ``crit_of(k)``."""
     from types import SimpleNamespace
@@ -109,18 +93,17 @@ def _order_search(crit_of):
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.integers(1, 8), st.integers(0, 40), st.floats(0.0, 1.0), st.floats(0.1, 20.0),
-       st.floats(0.1, 20.0))
-def test_order_search_finds_a_unimodal_criterions_best_with_fewer_trials(
-        lo, span, where, left, right):
-    hi = lo + span
-    best = lo + round(where * span)
-    s = _order_search(lambda k: left * (best - k) if k <= best else right * (k - best))
+@given(st.integers(1, 8), st.lists(st.integers(0, 400), min_size=1, max_size=29, unique=True))
+def test_order_search_takes_the_best_criterion_of_every_count(lo, crits):
+    """The structural order is the count with the least criterion, however it varies.
+
+    A knot count's criterion is not unimodal (joint100: odd counts 5 / 9 / 13 at BIC
+    +7.4 / +0.1 / 0 with the even ones between 17–57 above): no count is skipped.
+    """
+    hi = lo + len(crits) - 1
+    s = _order_search(lambda k: 2.0 * crits[k - lo])
     got = s._order({'k': lo}, lo, hi)['k']
-    assert got == best
-    assert len(set(s.scored)) <= span + 1
-    if span >= 28:
-        assert len(set(s.scored)) <= 0.7 * (span + 1)
+    assert got == lo + int(np.argmin(crits))
 
 
 @pytest.mark.parametrize('n', [1, 2, 7, 97, 1000, 4097, 65537, 199999])
