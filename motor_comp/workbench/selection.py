@@ -296,16 +296,18 @@ class Engine:
             hit = self._scored[key] = self._score(base, name)
         return hit
 
-    def joined(self, cand: CandidateResult) -> Estimate:
+    def joined(self, cand: CandidateResult, fitted: Estimate | None = None) -> Estimate:
         """Return the model ``cand`` makes when the forward step takes it (:func:`research`).
 
         The look-ahead (:func:`.lookahead.simpler`) scores a candidate's follow-ups on the
         model the step would make, so the round after the step finds them scored.
+        ``fitted``: ``cand``'s spec already estimated on its rows (not fitted again).
         """
         key = spec_key(cand.spec)
         hit = self._joined.get(key)
         if hit is None:
-            new = estimate(self.data_for(cand.spec), cand.spec, cand.model)
+            new = fitted if fitted is not None else \
+                estimate(self.data_for(cand.spec), cand.spec, cand.model)
             hit = self._joined[key] = research(self, new, cand.effect)
         return hit
 
@@ -454,7 +456,7 @@ def select(eng: Engine, est: Estimate, step: Step, say: Callable[[str], None],
         if not new.sse_cv < base_sse:
             say(f'{best.effect}: the held-out error did not fall: stopping')
             break
-        est = eng.joined(best)
+        est = eng.joined(best, new)
         step(best.effect, 'add', est, '')
         est = backward(eng, est, best.effect, step, removed_once)
     return prune(eng, restructure(eng, est, step), step)
