@@ -15,6 +15,9 @@ import math
 from typing import Sequence
 
 import numpy as np
+from numba import njit
+
+from motor_comp.physics import aot
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,49 +90,132 @@ def box_qp(A: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray, *,
     (Stark & Parker 1995) finds on the Gram's factor.  Written here because the
     workbench holds the Gram, not the design: ``scipy.optimize.lsq_linear`` needs a
     factor of it, and the factor, its checks and its BVLS took twice as long as this
-    (0.30 against 0.14 ms a call under the profiler; 13 % of the ball-screw run's
-    ``fit --auto`` went to it).  If the active set has not settled after ``iterations``
-    changes (default ``4p + 10``: cycling on a degenerate vertex), that BVLS solves it.
+    in numpy (0.30 against 0.14 ms a call under the profiler; 13 % of the ball-screw
+    run's ``fit --auto`` went to it); the iterations are compiled
+    (:func:`_box_active`, the subsystems by Cholesky).  If the active set has not
+    settled after ``iterations`` changes (default ``4p + 10``: cycling on a degenerate
+    vertex), that BVLS solves it.
     """
-    p = len(b)
-    x = np.linalg.solve(A, b)
-    at = np.zeros(p, dtype=np.int8)           # -1 at lo, +1 at hi, 0 free
-    at[x <= lo] = -1
-    at[x >= hi] = 1
-    x = np.clip(x, lo, hi)
-    for _ in range(4 * p + 10 if iterations is None else iterations):
-        free = at == 0
-        fixed = ~free
-        target = x.copy()
-        if np.any(free):
-            rhs = b[free] - A[np.ix_(free, fixed)] @ x[fixed]
-            target[free] = np.linalg.solve(A[np.ix_(free, free)], rhs)
-        step = target - x
-        # the longest step along which every free coefficient stays in the box
-        alpha, block = 1.0, -1
-        for i in np.flatnonzero(free & ((target < lo) | (target > hi))):
-            bound = lo[i] if step[i] < 0 else hi[i]
-            a = (bound - x[i]) / step[i] if step[i] != 0.0 else 0.0
-            if a < alpha:
-                alpha, block = a, i
-        x = x + max(alpha, 0.0) * step
-        if block >= 0:
-            x[block] = lo[block] if step[block] < 0 else hi[block]
-            at[block] = -1 if step[block] < 0 else 1
-            continue
-        g = A @ x - b                          # the multipliers of the active bounds
-        wrong = np.where(at == -1, -g, np.where(at == 1, g, 0.0))
-        j = int(np.argmax(wrong))
-        if wrong[j] <= 1e-13 * max(float(np.abs(b).max()), 1e-300):
-            break
-        at[j] = 0
-    else:
+    A = np.ascontiguousarray(A, dtype=float)
+    x, settled = _box_active_entry(A, np.ascontiguousarray(b, dtype=float),
+                                   np.ascontiguousarray(lo, dtype=float),
+                                   np.ascontiguousarray(hi, dtype=float),
+                                   4 * len(b) + 10 if iterations is None else int(iterations))
+    if not settled:
         # not settled (cycling on a degenerate vertex): scipy's BVLS on the factor
         from scipy.optimize import lsq_linear
         R = np.linalg.cholesky(A).T
         x = lsq_linear(R, np.linalg.solve(R.T, b), bounds=(lo, hi), method='bvls',
                        tol=1e-12).x
     return np.clip(x, lo, hi)
+
+
+@njit(cache=True, inline='always')
+def _sub_solve(A, r, idx, m, out):
+    # solve A[idx, idx]·y = r[:m] (the first m of idx) by Cholesky into out[:m]; False
+    # when a pivot is not positive
+    L = np.zeros((m, m))
+    for j in range(m):
+        a = A[idx[j], idx[j]]
+        for k in range(j):
+            a -= L[j, k] * L[j, k]
+        if not a > 0.0:
+            return False
+        L[j, j] = np.sqrt(a)
+        for i in range(j + 1, m):
+            a = A[idx[i], idx[j]]
+            for k in range(j):
+                a -= L[i, k] * L[j, k]
+            L[i, j] = a / L[j, j]
+    for i in range(m):
+        a = r[i]
+        for k in range(i):
+            a -= L[i, k] * out[k]
+        out[i] = a / L[i, i]
+    for i in range(m - 1, -1, -1):
+        a = out[i]
+        for k in range(i + 1, m):
+            a -= L[k, i] * out[k]
+        out[i] = a / L[i, i]
+    return True
+
+
+@aot.ahead(aot.F8_2D, aot.F8_1D, aot.F8_1D, aot.F8_1D, aot.I8)
+@njit(cache=True)
+def _box_active(A, b, lo, hi, iterations):
+    # box_qp's active-set iterations, compiled: the systems are the same few unknowns as
+    # solve_gram's and numpy's cost per call was most of each (~150 us a bounded solve);
+    # returns (x, settled) — not settled after `iterations` changes, or a subsystem
+    # that is not positive definite, leaves it to the caller
+    p = b.shape[0]
+    idx = np.arange(p)
+    x = np.empty(p)
+    if not _sub_solve(A, b, idx, p, x):
+        return x, False
+    at = np.zeros(p, np.int8)                 # -1 at lo, +1 at hi, 0 free
+    for i in range(p):
+        if x[i] >= hi[i]:
+            at[i] = 1
+        elif x[i] <= lo[i]:
+            at[i] = -1
+        x[i] = min(max(x[i], lo[i]), hi[i])
+    target = np.empty(p)
+    step = np.empty(p)
+    rhs = np.empty(p)
+    sol = np.empty(p)
+    scale = 0.0
+    for i in range(p):
+        scale = max(scale, abs(b[i]))
+    for _ in range(iterations):
+        m = 0
+        for i in range(p):
+            target[i] = x[i]
+            if at[i] == 0:
+                idx[m] = i
+                m += 1
+        if m > 0:
+            for a in range(m):
+                i = idx[a]
+                r = b[i]
+                for k in range(p):
+                    if at[k] != 0:
+                        r -= A[i, k] * x[k]
+                rhs[a] = r
+            if not _sub_solve(A, rhs, idx, m, sol):
+                return x, False
+            for a in range(m):
+                target[idx[a]] = sol[a]
+        # the longest step along which every free coefficient stays in the box
+        alpha, block = 1.0, -1
+        for i in range(p):
+            step[i] = target[i] - x[i]
+        for i in range(p):
+            if at[i] != 0 or not (target[i] < lo[i] or target[i] > hi[i]):
+                continue
+            bound = lo[i] if step[i] < 0 else hi[i]
+            a = (bound - x[i]) / step[i] if step[i] != 0.0 else 0.0
+            if a < alpha:
+                alpha, block = a, i
+        alpha = max(alpha, 0.0)
+        for i in range(p):
+            x[i] = x[i] + alpha * step[i]
+        if block >= 0:
+            x[block] = lo[block] if step[block] < 0 else hi[block]
+            at[block] = -1 if step[block] < 0 else 1
+            continue
+        # the multipliers of the active bounds: the one of the wrong sign is released
+        j, worst = 0, -np.inf
+        for i in range(p):
+            g = -b[i]
+            for k in range(p):
+                g += A[i, k] * x[k]
+            w = -g if at[i] == -1 else (g if at[i] == 1 else 0.0)
+            if w > worst:
+                j, worst = i, w
+        if worst <= 1e-13 * max(scale, 1e-300):
+            return x, True
+        at[j] = 0
+    return x, False
 
 
 def linear_qp(A: np.ndarray, b: np.ndarray, C: np.ndarray, d: np.ndarray,
@@ -213,41 +299,132 @@ def _bounded(A: np.ndarray, b: np.ndarray, bounds: Bounds) -> np.ndarray:
     return np.clip(res.x, lo, hi) / d
 
 
+#: what :func:`_normal_solve` found: the scaled system was not positive definite (a
+#: numpy solve decides), the solution meets every bound, or it does not
+_NOT_FACTORED, _FEASIBLE, _INFEASIBLE = 0, 1, 2
+
+
+@njit(cache=True, inline='always')
+def _normal_solve(G, th):
+    # θ of the augmented Gram's scaled, ridged normal equations (solve_gram's) into
+    # `th` (_sub_solve: the scaled Gram has a unit diagonal, and with the ridge it is
+    # positive definite); False when a pivot says otherwise (numpy decides).  Compiled
+    # because the systems are tiny (2-8 unknowns in most of a search's thousands of
+    # solves) and numpy's cost per call was most of each: 87 us a solve, 0.42 s of
+    # the ball-screw run's fit.
+    p = G.shape[0] - 1
+    d = np.empty(p)
+    for i in range(p):
+        d[i] = np.sqrt(max(G[i, i], 1e-300))
+    As = np.empty((p, p))
+    bs = np.empty(p)
+    for i in range(p):
+        for j in range(p):
+            As[i, j] = G[i, j] / (d[i] * d[j])
+        As[i, i] += 1e-10
+        bs[i] = G[i, p] / d[i]
+    if not _sub_solve(As, bs, np.arange(p), p, th):
+        return False
+    for i in range(p):
+        th[i] /= d[i]
+    return True
+
+
+@aot.ahead(aot.F8_2D, aot.F8_1D, aot.F8_1D, aot.F8_2D, aot.F8_1D)
+@njit(cache=True)
+def _solve_small(G, lo, hi, C, c):
+    # solve_gram's unbounded solve in one compiled call: θ (_normal_solve), the SSE as
+    # sse_with takes it, and whether θ meets the bounds and constraints
+    p = G.shape[0] - 1
+    th = np.zeros(p)
+    if not _normal_solve(G, th):
+        return th, 0.0, _NOT_FACTORED
+    # the SSE as sse_with: G_yy − 2·θᵀG_xy + θᵀG_xx·θ, at least 0
+    lin = 0.0
+    quad = 0.0
+    for i in range(p):
+        lin += th[i] * G[i, p]
+        row = 0.0
+        for k in range(p):
+            row += G[i, k] * th[k]
+        quad += th[i] * row
+    sse = max(G[p, p] - 2.0 * lin + quad, 0.0)
+    state = _FEASIBLE
+    for i in range(p):
+        if th[i] < lo[i] or th[i] > hi[i]:
+            state = _INFEASIBLE
+    for r in range(C.shape[0]):
+        a = 0.0
+        for k in range(p):
+            a += C[r, k] * th[k]
+        if not a >= c[r]:
+            state = _INFEASIBLE
+    return th, sse, state
+
+
+@aot.ahead(aot.array(3))
+@njit(cache=True)
+def _solve_stack(Gs):
+    # _normal_solve of each Gram of a stack; a row of NaN where one was not factored
+    k, p = Gs.shape[0], Gs.shape[1] - 1
+    out = np.empty((k, p))
+    th = np.zeros(p)
+    for i in range(k):
+        if _normal_solve(Gs[i], th):
+            out[i] = th
+        else:
+            out[i] = np.nan
+    return out
+
+
+_FREE: dict = {}
+
+
+def _free_of(p: int) -> Bounds:
+    hit = _FREE.get(p)
+    if hit is None:
+        hit = _FREE[p] = Bounds.free(p)
+    return hit
+
+
 def solve_gram(G: np.ndarray, bounds: Bounds | None = None) -> tuple[np.ndarray, float]:
     """Return θ and the SSE from an augmented Gram ``[X y]ᵀ[X y]`` (bounds enforced).
 
     A tiny ridge on the column-scaled system keeps a rank-deficient design (a column
-    that is all zero on these rows) solvable; a solution outside the bounds is
-    re-solved with them.
+    that is all zero on these rows) solvable (compiled, :func:`_normal_solve`); a
+    solution outside the bounds is re-solved with them.
     """
     p = G.shape[0] - 1
     if p == 0:
         return np.zeros(0), float(G[0, 0])
-    A, b = G[:p, :p], G[:p, p]
-    th = _unconstrained(A, b)
-    if bounds is not None and bounds.active and not bounds.feasible(th):
-        th = _bounded(A, b, bounds)
-    return th, sse_with(G, th)
+    b = bounds if bounds is not None else _free_of(p)
+    th, sse, state = _solve_small_entry(np.ascontiguousarray(G, dtype=float), b.lo, b.hi,
+                                        b.A, b.b)
+    if state == _NOT_FACTORED:
+        th = _unconstrained(G[:p, :p], G[:p, p])
+        sse = sse_with(G, th)
+        state = _FEASIBLE if b.feasible(th) else _INFEASIBLE
+    if state == _INFEASIBLE and b.active:
+        th = _bounded(G[:p, :p], G[:p, p], b)
+        sse = sse_with(G, th)
+    return th, float(sse)
 
 
 def solve_grams(Gs: np.ndarray) -> np.ndarray:
     """Return the unbounded θ of a stack of augmented Grams, shape ``(k, p)``.
 
-    :func:`solve_gram` without bounds for many Grams at once: the same scaled,
-    ridged normal equations, solved by one stacked LAPACK call (the same routine, the
-    same numbers); a singular one is solved alone, as :func:`solve_gram` would.
+    :func:`solve_gram` without bounds for many Grams at once, in one compiled call:
+    the same routine, the same numbers; one that is not factored is solved alone, as
+    :func:`solve_gram` would.
     """
-    Gs = np.asarray(Gs, dtype=float)
+    Gs = np.ascontiguousarray(Gs, dtype=float)
     p = Gs.shape[-1] - 1
     if p == 0:
         return np.zeros((Gs.shape[0], 0))
-    A, b = Gs[:, :p, :p], Gs[:, :p, p]
-    d = np.sqrt(np.maximum(np.diagonal(A, axis1=1, axis2=2), 1e-300))
-    As = A / (d[:, :, None] * d[:, None, :])
-    try:
-        return np.linalg.solve(As + 1e-10 * np.eye(p), (b / d)[:, :, None])[:, :, 0] / d
-    except np.linalg.LinAlgError:
-        return np.stack([_unconstrained(a, v) for a, v in zip(A, b)])
+    th = _solve_stack_entry(Gs)
+    for i in np.flatnonzero(np.isnan(th[:, 0])):
+        th[i] = solve_gram(Gs[i])[0]
+    return th
 
 
 @dataclasses.dataclass(frozen=True)
@@ -276,3 +453,10 @@ def bic(n_eff: float, sse0: float, sse1: float, dp: int) -> float:
 
 __all__ = ['Bounds', 'Score', 'bic', 'box_qp', 'cv_grams', 'linear_qp', 'solve_gram',
            'solve_grams', 'sse_with']
+
+
+# Python calls the kernel above through its entry: compiled ahead of time where built
+# (see motor_comp.physics.aot), else the JIT
+_solve_small_entry = aot.entry(_solve_small)
+_solve_stack_entry = aot.entry(_solve_stack)
+_box_active_entry = aot.entry(_box_active)

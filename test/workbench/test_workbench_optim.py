@@ -155,6 +155,26 @@ def test_box_qp_is_bounded_least_squares(p, seed, collinear):
 
 
 @settings(max_examples=120, deadline=None)
+@given(p=st.integers(1, 16), seed=st.integers(0, 2 ** 16), zero=st.booleans())
+def test_the_compiled_solve_is_least_squares(p, seed, zero):
+    """θ and SSE of an augmented Gram: numpy's least squares on the design it comes from."""
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(60, p)) * 10.0 ** rng.uniform(-3, 3, size=p)
+    if zero:
+        X[:, 0] = 0.0                     # a column all zero on these rows: the ridge
+    y = X @ rng.normal(size=p) + rng.normal(size=60)
+    Z = np.column_stack([X, y])
+    th, sse = solve_gram(Z.T @ Z)
+    keep = slice(1, None) if zero else slice(None)
+    ref = np.linalg.lstsq(X[:, keep], y, rcond=None)[0]
+    np.testing.assert_allclose(X[:, keep] @ th[keep], X[:, keep] @ ref, rtol=1e-8,
+                               atol=1e-8 * float(np.abs(y).max()))
+    assert abs(sse - float(np.sum((y - X @ th) ** 2))) <= 1e-8 * float(y @ y)
+    if zero:
+        assert th[0] == 0.0
+
+
+@settings(max_examples=120, deadline=None)
 @given(p=st.integers(2, 10), m=st.integers(1, 3), seed=st.integers(0, 2 ** 16))
 def test_linear_constraints_are_held_at_slsqps_minimum(p, m, seed):
     rng = np.random.default_rng(seed)
