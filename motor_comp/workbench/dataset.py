@@ -321,10 +321,12 @@ class Dataset:
                     break
                 G[i, j] = G[j, i] = v
         if missing:
-            Z = np.stack(cols, axis=1)
+            # the columns as rows of one array (each a contiguous copy; a stack along
+            # axis 1 transposed them element by element)
+            Z = np.array(cols)
             if rows is not None:
-                Z = Z[rows]
-            M = Z[:, missing].T @ Z
+                Z = Z[:, rows]
+            M = Z[missing] @ Z.T
             if len(cache) > 200_000:
                 cache.clear()
             for a, i in enumerate(missing):
@@ -333,10 +335,9 @@ class Dataset:
                 ki = ks[i]
                 if ki is None:
                     continue
-                for j in range(q):
-                    kj = ks[j]
+                for kj, v in zip(ks, M[a].tolist()):
                     if kj is not None:
-                        cache[(rid, ki, kj)] = cache[(rid, kj, ki)] = M[a, j]
+                        cache[(rid, ki, kj)] = cache[(rid, kj, ki)] = v
         return G
 
 
@@ -461,8 +462,15 @@ class View:
                 pick = [col.index for _, col in group]
                 parts = []
                 for p, path in zip(self.data.parts, paths):
-                    a = np.asarray(col0.fn(path), dtype=float)
                     keep = 1.0 - path.rest if rests else None
+                    if col0.local is not None:
+                        # smoothed on its local basis and mapped (the smoother is linear)
+                        lb = col0.local(path)
+                        val = lb.value if keep is None else lb.value * keep[:, None]
+                        sl = proc.smooth_local_at(lb.index, val, lb.mix.shape[0], p.rows, p.W)
+                        parts.append(np.ascontiguousarray((sl @ lb.mix[:, pick]).T))
+                        continue
+                    a = np.asarray(col0.fn(path), dtype=float)
                     if a.ndim == 1:
                         parts.append(proc.smooth_at(a if keep is None else a * keep,
                                                     p.rows, p.W))

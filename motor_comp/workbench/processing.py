@@ -108,6 +108,42 @@ def smooth_columns_at(y: np.ndarray, rows: np.ndarray, W: int) -> np.ndarray:
     return _smooth_rows_entry(np.ascontiguousarray(y.T), rows, kernel(W))
 
 
+def smooth_local_at(index: np.ndarray, value: np.ndarray, size: int, rows: np.ndarray,
+                    W: int) -> np.ndarray:
+    """Return ``S(L)`` at ``rows`` of a sample-local basis ``L``: shape ``(rows, size)``.
+
+    ``L`` has ``size`` functions; sample ``i`` touches ``index[i]`` with ``value[i]``
+    (:class:`~motor_comp.physics.effects.identification.LocalBasis`).  The same sums as
+    :func:`smooth_columns_at` of the dense ``L`` (each row's over the taps in order),
+    at the cost of the functions each sample touches instead of all of them.
+    """
+    h = W // 2
+    if len(rows) and (rows[0] < h or rows[-1] + h >= index.shape[0]):
+        raise ValueError('rows within a smoother half-width of the record ends')
+    return _smooth_local_entry(np.ascontiguousarray(index, dtype=np.int64),
+                               np.ascontiguousarray(value, dtype=float), int(size), rows,
+                               kernel(W))
+
+
+@aot.ahead(aot.array(2, 'int64'), aot.F8_2D, aot.I8, aot.I8_1D, aot.F8_1D)
+@njit(cache=True)
+def _smooth_local(index, value, size, rows, b):
+    # hand-written for the same reason as _smooth_rows (the rows are a sparse subset),
+    # and because no library smooths a basis given by its nonzeros: row by row, the taps
+    # in order, each sample's few functions
+    nr, W, m = rows.shape[0], b.shape[0], index.shape[1]
+    h = W // 2
+    out = np.zeros((nr, size))
+    for q in range(nr):
+        r0 = rows[q] - h
+        for j in range(W):
+            bj = b[j]
+            s = r0 + j
+            for k in range(m):
+                out[q, index[s, k]] += bj * value[s, k]
+    return out
+
+
 #: rows summed side by side in one pass of the taps (a tile of the output that stays in
 #: the processor's first-level cache)
 _TILE = 256
@@ -452,10 +488,11 @@ class Processing:
 
 __all__ = ['Processing', 'fit_rows_mask', 'gms_position', 'held_ends', 'kernel', 'point_position',
            'point_velocity', 'short_window', 'sliding_mask', 'sliding_threshold', 'smooth_at',
-           'smooth_columns_at', 'smooth_full', 'smoother_length', 'stencil', 'stencil_gain',
-           'touches']
+           'smooth_columns_at', 'smooth_full', 'smooth_local_at', 'smoother_length', 'stencil',
+           'stencil_gain', 'touches']
 
 
 # Python calls the kernels above through their entries: compiled ahead of time where
 # built (see motor_comp.physics.aot), else the JIT
 _smooth_rows_entry = aot.entry(_smooth_rows)
+_smooth_local_entry = aot.entry(_smooth_local)

@@ -289,6 +289,27 @@ def test_compiled_basis_equals_the_array_form_bit_for_bit():
         assert np.array_equal(C, want) and np.array_equal(np.signbit(C), np.signbit(want))
 
 
+def test_the_local_basis_mapped_is_the_basis():
+    """``L·mix`` of :meth:`PositionFriction.local_basis` is :meth:`basis` (to rounding)."""
+    rng = np.random.default_rng(9)
+    for n in (2, 3, 8, MAX_KNOTS):
+        knots = np.sort(rng.uniform(-0.05, 0.05, n))
+        x = 0.06 * np.sin(np.linspace(0.0, 40.0, 3000))
+        x[::97] = knots[n // 2]                       # exactly at a knot
+        d = np.where(np.arange(len(x)) % 3 == 0, -1.0, rng.uniform(0.0, 1.0, len(x)))
+        pf = _pf(knots, np.zeros(n))
+        for first, sign in ((0, None), (1, d)):
+            lb = pf.local_basis(x, sign, first=first)
+            assert lb.index.shape == lb.value.shape == (len(x), 4)
+            assert lb.mix.shape == (2 * n, n - first)
+            L = np.zeros((len(x), 2 * n))
+            for k in range(4):
+                np.add.at(L, (np.arange(len(x)), lb.index[:, k]), lb.value[:, k])
+            want = pf.basis(x, sign, first=first)
+            np.testing.assert_allclose(L @ lb.mix, want, rtol=0,
+                                       atol=1e-12 * max(1.0, float(np.abs(want).max())))
+
+
 def test_regressors_are_basis_times_direction():
     pf = make_effect('position_friction', SPOT)
     x = np.linspace(0.0, 0.3, 301)

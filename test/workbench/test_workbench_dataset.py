@@ -18,7 +18,8 @@ from motor_comp.physics.effects.identification import Signal
 from motor_comp.workbench import kinematics
 from motor_comp.workbench import processing as proc
 from motor_comp.workbench.dataset import Dataset
-from motor_comp.workbench.library import Spec, design
+from motor_comp.physics.effects import TERMS
+from motor_comp.workbench.library import Spec, context, design
 from motor_comp.workbench.synthetic import scenario
 
 
@@ -99,6 +100,47 @@ def test_the_delayed_input_smoothed_per_shift_equals_smoothing_it_whole(data, ta
     for got, factor in ((view.y(), g), (view.y(rests=True), g * (1.0 - mo.shares[3]))):
         want = proc.smooth_at(factor * direct, p.rows, p.W) - k * view.signal(Signal.VELOCITY)
         assert np.max(np.abs(got - want)) <= 1e-12 * max(1.0, float(np.max(np.abs(want))))
+
+
+@settings(max_examples=30, deadline=None)
+@given(W=st.sampled_from([7, 41, 81]), size=st.integers(1, 12), m=st.integers(1, 4),
+       seed=st.integers(0, 2**31 - 1))
+def test_a_local_basis_smooths_as_its_dense_columns(W, size, m, seed):
+    """Each sample's few functions, smoothed: the dense columns' sums (zeros add nothing)."""
+    rng = np.random.default_rng(seed)
+    n = 3000
+    index = rng.integers(0, size, size=(n, m))
+    value = rng.normal(size=(n, m)) * 10.0 ** rng.uniform(-3, 3)
+    dense = np.zeros((n, size))
+    for k in range(m):
+        np.add.at(dense, (np.arange(n), index[:, k]), value[:, k])
+    h = W // 2
+    rows = np.unique(rng.integers(h, n - h - 1, size=400))
+    got = proc.smooth_local_at(index, value, size, rows, W)
+    want = proc.smooth_at(dense, rows, W)
+    assert got.shape == (len(rows), size)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * float(np.abs(value).max()))
+    with pytest.raises(ValueError, match='record ends'):
+        proc.smooth_local_at(index, value, size, np.array([h - 1]), W)
+
+
+def test_a_friction_along_the_travel_is_the_same_block_smoothed_local_or_dense(data):
+    """The view smooths a position friction on its local basis: its dense block's values."""
+    import dataclasses as dc
+    D0, plant = data
+    x = D0.kins[0].position
+    knots = tuple(np.linspace(float(x.min()), float(x.max()), 9))
+    spec = Spec(('coulomb', 'position_friction'), {'coulomb': {}, 'position_friction':
+                                                   {'x': knots}}, True, plant.mass)
+    for rests in (False, True):
+        D = Dataset(D0.kins, plant)
+        view = D.at()
+        cols = [c for c in TERMS['position_friction'].columns({'x': knots}, context(spec, D))]
+        got = view.columns(cols, rests=rests)
+        dense = Dataset(D0.kins, plant).at().columns([dc.replace(c, local=None) for c in cols],
+                                                     rests=rests)
+        for g, w in zip(got, dense):
+            np.testing.assert_allclose(g, w, rtol=0, atol=1e-12 * float(np.abs(w).max()))
 
 
 def test_smoothing_refuses_rows_at_the_record_ends():

@@ -167,6 +167,31 @@ class Context:
 
 
 @dataclasses.dataclass(frozen=True)
+class LocalBasis:
+    """A block of columns written as ``B = L·mix``, ``L`` a basis local in the samples.
+
+    Each sample touches few functions of ``L`` (a spline's pieces: the Hermite value
+    and slope weights of the interval it lies in), so the workbench smooths ``L``
+    sample by sample at the cost of those few and maps the result by ``mix`` (its
+    smoother is linear): a block of many dense columns is then smoothed in the time of
+    a few.
+
+    Parameters
+    ----------
+    index : ndarray of int64, shape (n, m)
+        The local functions sample ``i`` touches (``0 <= index < mix.shape[0]``).
+    value : ndarray, shape (n, m)
+        Their values at sample ``i``.
+    mix : ndarray, shape (size, width)
+        The block's columns in terms of the local functions.
+    """
+
+    index: np.ndarray
+    value: np.ndarray
+    mix: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
 class Column:
     """One regressor column: a coefficient and the pointwise signal it multiplies.
 
@@ -197,6 +222,9 @@ class Column:
         columns, the element).
     uses_input : bool
         The column depends on the drive input (``path.f_in``), hence on a dead time.
+    local : callable, optional
+        ``local(path) -> LocalBasis``: the same block as ``fn`` on a basis local in the
+        samples, which the workbench smooths in its place (:class:`LocalBasis`).
     """
 
     label: str
@@ -210,6 +238,7 @@ class Column:
     width: int = 1
     index: int = 0
     uses_input: bool = False
+    local: Callable[[Any], LocalBasis] | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -426,5 +455,5 @@ class Term:
         return e
 
 
-__all__ = ['MASS', 'Column', 'Constraint', 'Context', 'Evidence', 'Param', 'Path', 'Signal',
-           'Summary', 'Term']
+__all__ = ['MASS', 'Column', 'Constraint', 'Context', 'Evidence', 'LocalBasis', 'Param', 'Path',
+           'Signal', 'Summary', 'Term']
