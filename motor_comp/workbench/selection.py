@@ -31,8 +31,9 @@
   braking chirp: 54 % of a residual 1.41× the floor, none of the twin's; a stand-in
   backlash on a chirp without one: 73 % of the run's, but 62 % of the twin's).  It is
   judged on the sliding rows only, where the twin replicates the run.  Its
-  fitted values must lie in the term's declared domain, and bounds hold inside the
-  estimator.
+  fitted values must lie in the term's declared domain (one fitted outside it is
+  scored at its all-data fit, not chosen again in each fold: nothing it explains could
+  make it pay), and bounds hold inside the estimator.
 * **Forward** adds the supported candidate with the best held-out BIC — or the first of
   two simpler ones that together beat a flexible one with its own best simpler
   follow-up (two steps against two); when none pays alone, two strong ones that pay
@@ -315,14 +316,25 @@ class Engine:
         D = self.data_for(base.spec.with_(name, {}))
         sse0 = base.sse_cv if D is self.data_for(base.spec) else \
             cv_design(D, base.spec, base.model)[0]
-        # a candidate scored in an earlier round starts from its optimum there
+        # its fit on all rows, which says whether its values are in the term's domain
+        fits: dict = {}
+
+        def fitted(eta: dict) -> Estimate:
+            key = spec_key(base.spec.with_(name, eta))
+            hit = fits.get(key)
+            if hit is None:
+                hit = fits[key] = estimate(D, base.spec.with_(name, eta), base.model, cv=False)
+            return hit
+        # a candidate scored in an earlier round starts from its optimum there; one
+        # fitted outside its domain is refused whatever it explains: not chosen in-fold
         cand = cv_candidate(D, base.spec, name, base.model, screen=0.5 * self.min_gain,
-                            start=self._warm.get(name))
+                            start=self._warm.get(name),
+                            refused=lambda eta: bool(fitted(eta).inadmissible.get(name)))
         sse, eta = cand.sse_cv, cand.eta
         if eta:
             self._warm[name] = eta
         spec = base.spec.with_(name, eta)
-        est = estimate(D, spec, base.model, cv=False)
+        est = fitted(eta)
         dp = n_params(spec) - n_params(base.spec)
         # the noise floor (a simulation of the run) only when the rule needs it
         floor = lambda: self.floor_sse(base, D)  # noqa: E731

@@ -34,7 +34,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -498,13 +498,16 @@ class CandidateCV:
 
 
 def cv_candidate(data: Dataset, spec: Spec, name: str, model: AxisModel | None, *,
-                 screen: float = 0.0, start: Mapping | None = None) -> CandidateCV:
+                 screen: float = 0.0, start: Mapping | None = None,
+                 refused: Callable[[dict], bool] | None = None) -> CandidateCV:
     """Return the held-out SSE of ``spec`` + ``name`` (η chosen in-fold) and the all-data η.
 
     With ``screen`` > 0, a candidate whose all-data (in-sample) gain is below
     ``screen`` is scored with its nonlinear parameters held at the all-data choice
-    (it cannot pay on held-out data anyway, and the in-fold choices are the cost).
-    ``start`` is where the search of the nonlinear parameters starts (default the grid).
+    (it cannot pay on held-out data anyway, and the in-fold choices are the cost);
+    so is one that ``refused(η)`` says cannot be taken whatever its score (fitted
+    outside the term's declared domain).  ``start`` is where the search of the
+    nonlinear parameters starts (default the grid).
     """
     t = TERMS[name]
     if not searched(t):
@@ -518,6 +521,8 @@ def cv_candidate(data: Dataset, spec: Spec, name: str, model: AxisModel | None, 
         if sse0 <= 0 or 1.0 - sse1 / sse0 < screen:
             return CandidateCV(cv_design(data, s1, model)[0], eta_all)
         eta_all = refine_structure(data, s1, name, model)
+    if refused is not None and refused(eta_all):
+        return CandidateCV(cv_design(data, spec.with_(name, eta_all), model)[0], eta_all)
     length = t.repeats_every(eta_all)
     if length is not None:
         b = block_cv(data, spec.with_(name, eta_all), name, model, length)

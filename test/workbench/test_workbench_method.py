@@ -175,6 +175,29 @@ def test_the_look_ahead_scores_on_the_model_the_step_makes(sweep_engine):
                      'viscous') is follow
 
 
+def test_a_candidate_fitted_outside_its_domain_is_not_chosen_in_fold(sweep_engine):
+    """Refused at its all-data fit, a candidate is scored held there (as a screened one).
+
+    Whatever it explains it cannot be taken; the in-fold choices were its cost (no screen
+    here: it is asked of every candidate the screen passes).  One that is not refused is
+    chosen in-fold as before.
+    """
+    from motor_comp.workbench.varpro import cv_candidate, cv_design
+    eng = sweep_engine
+    base = eng.joined(eng.score(eng.h0(eng.model), 'coulomb'))
+    D = eng.data_for(base.spec)
+    asked = []
+
+    def refuse(eta: dict) -> bool:
+        asked.append(eta)
+        return True
+    held = cv_candidate(D, base.spec, 'stribeck', base.model, refused=refuse)
+    assert asked == [held.eta]
+    assert held.sse_cv == cv_design(D, base.spec.with_('stribeck', held.eta), base.model)[0]
+    free = cv_candidate(D, base.spec, 'stribeck', base.model, refused=lambda eta: False)
+    assert free == cv_candidate(D, base.spec, 'stribeck', base.model)
+
+
 def test_standard_errors_cover_the_truth_under_coloured_noise():
     """±2 SE holds the truth in most of 30 seeded runs with an AR(1) disturbance.
 
