@@ -17,7 +17,6 @@ ever re-synchronises anything.
 """
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import math
@@ -30,6 +29,7 @@ from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import EffectKind
 from motor_comp.physics.effects.identification import Column, Signal, Summary
 from motor_comp.workbench import processing as proc
+from motor_comp.workbench.bands import SpeedWeights
 from motor_comp.workbench.derivatives import Kinematics
 from motor_comp.workbench.motion import motor_position
 from motor_comp.workbench.parts import Motion, PathView, RunPart
@@ -39,19 +39,6 @@ from motor_comp.workbench.parts import Motion, PathView, RunPart
 MIN_DIRECTION_SHARE = 0.05
 #: memory for cached smoothed columns of one dataset [bytes]
 COLUMN_CACHE_BYTES = 256 * 2**20
-
-
-@dataclasses.dataclass(frozen=True)
-class SpeedWeights:
-    """Row weights by speed band: ``edges[i] ≤ |ẋ| < edges[i+1]`` gets ``w[i]`` (> 0)."""
-
-    edges: tuple
-    w: tuple
-
-    def __post_init__(self) -> None:
-        w = np.asarray(self.w, dtype=float)
-        if len(w) != len(self.edges) or not np.all(np.isfinite(w)) or np.any(w <= 0):
-            raise ParameterError('speed weights must be finite and positive, one per band')
 
 
 def forces_only(model: AxisModel) -> AxisModel:
@@ -532,4 +519,4 @@ class View:
 
 
 __all__ = ['COLUMN_CACHE_BYTES', 'Dataset', 'MIN_DIRECTION_SHARE', 'Motion', 'PathView',
-           'RunPart', 'SpeedWeights', 'View', 'model_signature']
+           'RunPart', 'View', 'model_signature']

@@ -21,7 +21,8 @@ import numpy as np
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import TERMS, VOCABULARY, EffectKind
 from motor_comp.physics.effects.identification import MASS, Column, Context, Signal, Term
-from motor_comp.workbench.dataset import Dataset, SpeedWeights, View
+from motor_comp.workbench.bands import SpeedWeights
+from motor_comp.workbench.dataset import Dataset, View
 from motor_comp.workbench.lsq import Bounds, solve_gram
 from motor_comp.workbench.processing import Processing
 

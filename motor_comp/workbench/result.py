@@ -18,7 +18,8 @@ import numpy as np
 
 from motor_comp.physics.axis import AxisKind, AxisModel, Units
 from motor_comp.physics.effects import TERMS
-from motor_comp.workbench.dataset import Dataset, SpeedWeights
+from motor_comp.workbench.bands import SpeedWeights
+from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.library import Spec, context, design, encode, n_params
 from motor_comp.workbench.lsq import solve_gram
 from motor_comp.workbench.uncertainty import block_sandwich, correlations, jacobian, \

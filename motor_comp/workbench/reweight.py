@@ -23,17 +23,14 @@ import numpy as np
 
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import TERMS, EffectKind
-from motor_comp.physics.effects.identification import Evidence, Signal
-from motor_comp.workbench.dataset import Dataset, SpeedWeights
+from motor_comp.physics.effects.identification import Signal
+from motor_comp.workbench.bands import PROTECTED, WEIGHT_BANDS, WEIGHT_CONTRAST, SpeedBands, \
+    SpeedWeights
+from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.library import Spec, design, n_params
 from motor_comp.workbench.lsq import bic, solve_gram, sse_with
 from motor_comp.workbench.result import Estimate, estimate
 from motor_comp.workbench.varpro import cv_design, search
-
-#: speed bands of the reweighting (equal numbers of rows)
-WEIGHT_BANDS = 20
-#: reweight only when the worst band's residual variance is this many times the median's
-WEIGHT_CONTRAST = 10.0
 
 
 def reweighted(eng: Any, est: Estimate) -> tuple[Estimate, str, list[str]] | None:
@@ -44,14 +41,9 @@ def reweighted(eng: Any, est: Estimate) -> tuple[Estimate, str, list[str]] | Non
     weights would suppress it (see the module docstring).
     """
     D = eng.data
-    protected = Evidence.SLOW | Evidence.TURNS | Evidence.STOPS
-    if any(TERMS[n].evidence & protected for n in est.spec.names) \
-            or D.n < 4 * WEIGHT_BANDS:
+    if any(TERMS[n].evidence & PROTECTED for n in est.spec.names):
         return None
     speed = np.abs(D.at().signal(Signal.VELOCITY))
-    edges = np.quantile(speed, np.linspace(0.0, 1.0, WEIGHT_BANDS + 1)[:-1])
-    edges[0] = 0.0
-    band = np.clip(np.searchsorted(edges, speed, side='right') - 1, 0, WEIGHT_BANDS - 1)
     spec = est.spec
     weights: SpeedWeights | None = None
     first = None
@@ -59,24 +51,21 @@ def reweighted(eng: Any, est: Estimate) -> tuple[Estimate, str, list[str]] | Non
         dw = design(D, spec, est.model, weights=weights)
         th, _ = solve_gram(dw.gram(), dw.bounds)
         d0 = design(D, spec, est.model)
-        e = d0.y - d0.X @ th
-        count = np.bincount(band, minlength=WEIGHT_BANDS)
-        var = np.bincount(band, e * e, minlength=WEIGHT_BANDS) / np.maximum(count, 1)
-        if np.any(count == 0) or np.min(var) <= 0:
+        bands = SpeedBands.of(speed, d0.y - d0.X @ th)
+        if bands is None:
             break
-        med = float(np.median(var))
         if first is None:
-            if np.max(var) < WEIGHT_CONTRAST * med:
+            if bands.contrast < WEIGHT_CONTRAST:
                 return None
-            first = (var, med)
-        weights = SpeedWeights(tuple(edges), tuple(med / var))
+            first = bands
+        weights = bands.weights
         for n in spec.names:
             t = TERMS[n]
             if t.params and t.kind is EffectKind.INPUT:
                 spec = spec.with_(n, search(D, spec, n, est.model, weights=weights))
     if first is None or weights is None:
         return None
-    var, med = first
+    var, med, edges = first.var, float(np.median(first.var)), first.edges
     spec, removed = _weighted_elimination(eng, spec, est.model, weights)
     new = estimate(D, spec, est.model, cv=False, weights=weights)
     sse = cv_unweighted(D, spec, est.model, weights)

@@ -29,7 +29,8 @@ import numpy as np
 from motor_comp.physics.axis import AxisModel
 from motor_comp.physics.effects import TERMS
 from motor_comp.physics.effects.identification import MASS
-from motor_comp.workbench.dataset import Dataset, SpeedWeights
+from motor_comp.workbench.bands import SpeedWeights
+from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.library import Spec, context, design, values_of
 from motor_comp.workbench.lsq import solve_gram
 from motor_comp.workbench.varpro import vp_sse

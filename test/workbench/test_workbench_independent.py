@@ -401,6 +401,21 @@ def test_time_ordered_sweep_keeps_viscous_with_the_right_value(outcomes):
         assert math.isclose(fv, o.truth['effects']['viscous']['fv'], rel_tol=0.05), o.why()
 
 
+def test_ripple_keeps_the_planted_harmonics(outcomes):
+    """The harmonic count is the planted one, 1–3 harmonics of amplitude 1 to 1/64.
+
+    Chosen by the information criterion, on the residual weighted by speed band where
+    the turns' rows dominate it (:mod:`motor_comp.workbench.bands`): the weights must
+    not cost a harmonic the sliding rows show.
+    """
+    hits = [o for o in outcomes if 'ripple' in o.expected]
+    assert len(hits) >= 10
+    counts = [(o.label, len(o.truth['effects']['ripple']['harmonics']),
+               len(o.fitted['effects'].get('ripple', {}).get('harmonics', ())))
+              for o in hits]
+    assert all(planted == found for _, planted, found in counts), counts
+
+
 def test_wrong_parameter_is_reported_as_that_parameter(outcomes):
     """Wrong fc / fv / gain / ripple amplitude: diagnose names it, --auto adds nothing.
 
