@@ -43,6 +43,9 @@ BINS = (4, 8, 16, 32)
 #: library effects with the shape of a structure (against, odd) → effect
 SHAPES = {('position', True): 'position_friction', ('force', True): 'load_friction',
           ('velocity', True): 'stribeck', ('position', False): 'ripple'}
+#: library effects with the shape of a constant level, whatever it is seen against: a
+#: friction level (odd) or a force of one sign (even)
+LEVEL_SHAPES = {True: 'coulomb', False: 'offset'}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,6 +69,10 @@ class Feature:
         Plain words.
     shape_of : str
         A library effect with this shape that the model lacks ('' when none).
+    level : float
+        Its level [N or N·m] when it is mostly one (the median of its mean over the
+        bins, holding more of its energy than the departures from it): a friction
+        level when odd, a force of one sign when not; 0 otherwise and for a tone.
     """
 
     against: str
@@ -75,13 +82,15 @@ class Feature:
     amplitude: float
     text: str
     shape_of: str = ''
+    level: float = 0.0
 
     def as_dict(self) -> dict[str, Any]:
         """Return the JSON form (DESIGN.md §6 ``features`` entry)."""
         return {'against': self.against, 'odd': bool(self.odd),
                 'where': [float(self.where[0]), float(self.where[1])],
                 'share': float(self.share), 'amplitude': float(self.amplitude),
-                'text': self.text, 'shape_of': self.shape_of or None}
+                'text': self.text, 'shape_of': self.shape_of or None,
+                'level': float(self.level)}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -312,6 +321,21 @@ def _tone(data: Dataset, r: np.ndarray, t: np.ndarray) \
     return float(opt.x), 0.5 / span, share, fit
 
 
+def _level(means: np.ndarray, counts: np.ndarray) -> float:
+    """Return a step function's typical level when it holds most of the function's energy.
+
+    A structure is described by its larger part: a residual that is mostly one level
+    (the friction of a model without Coulomb friction, on every bin of whatever it is
+    seen against) is that level, with its departures besides; 0 when the departures
+    hold more (a bump, a ripple, a rise at low speed).
+    """
+    if len(means) == 0 or counts.sum() <= 0:
+        return 0.0
+    base = float(np.median(means))
+    dep = float(counts @ (means - base) ** 2)
+    return base if base * base * float(counts.sum()) >= dep else 0.0
+
+
 def _where(edges: np.ndarray, means: np.ndarray) -> tuple[float, float, float]:
     """Return the span where a step function departs most from its typical level."""
     if len(means) == 0:
@@ -329,7 +353,8 @@ def _where(edges: np.ndarray, means: np.ndarray) -> tuple[float, float, float]:
 
 
 def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: float,
-          units: Units, shape: str, refused: str = '', inside: str = '') -> str:
+          units: Units, shape: str, refused: str = '', inside: str = '',
+          level: float = 0.0) -> str:
     kind = 'friction' if odd else 'force'
     way = 'higher' if amp > 0 else 'lower'
     # a bin edge at zero comes out of the quantiles as a rounding (2e-16 mm/s): it is 0
@@ -352,6 +377,16 @@ def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: floa
     body = f'{kind} {way} by {abs(amp):.3g} {units.force} {span}'
     if not odd and against != 'frequency':
         body += ', the same sign both ways'
+    if level:
+        # mostly one level: that first, its largest departure besides
+        if not odd:
+            head = f'a constant force of {level:.3g} {units.force}'
+        elif level > 0:
+            head = f'a friction level of {level:.3g} {units.force}'
+        else:
+            head = f'friction lower by {-level:.3g} {units.force} all along'
+        body = head + (f', {way} by {abs(amp):.3g} {units.force} {span}'
+                       if abs(amp) >= 0.1 * abs(level) else '')
     if shape and refused:
         # the candidates' verdict on this model stands over the scan's shape hint
         tail = f'; the library\'s {shape} has this shape, but does not pay here: {refused}'
@@ -439,7 +474,11 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
             cur = cur - means
             continue
         lo, hi, amp = _where(edges, means)
-        shape = SHAPES.get(key, '')
+        z = vars_[against]
+        z = np.abs(z) if odd and against in ('velocity', 'force') else z
+        idx = np.clip(np.searchsorted(edges, z, side='right') - 1, 0, len(means) - 1)
+        level = _level(means, np.bincount(idx[np.isfinite(z)], minlength=len(means)))
+        shape = LEVEL_SHAPES[odd] if level else SHAPES.get(key, '')
         inside = shape if shape in spec.names else ''
         if inside:
             shape = ''
@@ -448,10 +487,7 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
             verdict.why_not or 'it does not pay for its parameters on held-out data')
         feats.append(Feature(against, odd, (lo, hi), beyond, abs(amp),
                              _text(against, odd, lo, hi, amp, beyond, units, shape, refused,
-                                   inside), shape))
-        z = vars_[against]
-        z = np.abs(z) if odd and against in ('velocity', 'force') else z
-        idx = np.clip(np.searchsorted(edges, z, side='right') - 1, 0, len(means) - 1)
+                                   inside, level), shape, level))
         step = means[idx] * (vars_['speed_sign'] if odd else 1.0)
         cur = cur - np.where(np.isfinite(step), step, 0.0)
     near = math.isfinite(fnr) and nrmse <= NEAR_FLOOR * fnr
@@ -482,5 +518,5 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
                        input_noise_force=sig, input_noise_nrmse=part_in)
 
 
-__all__ = ['FEATURE_SHARE', 'Feature', 'NEAR_FLOOR', 'Profile', 'Unexplained',
+__all__ = ['FEATURE_SHARE', 'Feature', 'LEVEL_SHAPES', 'NEAR_FLOOR', 'Profile', 'Unexplained',
            'heldout_residual', 'scan']

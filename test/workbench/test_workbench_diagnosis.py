@@ -376,3 +376,30 @@ def test_a_span_from_zero_reads_from_zero():
     # a small edge that is not a rounding stays
     t = _text('velocity', True, 2e-5, 1e-3, 0.116, 0.1, LINEAR_UNITS, '')
     assert 'at speeds 0.02–1 mm/s' in t, t
+
+
+@pytest.mark.parametrize('label, effect, key, words', [
+    ('coulomb [lin vol 1000Hz sweep m2]', 'coulomb', 'fc', 'a friction level of'),
+    ('offset [lin vol 200Hz sweep m0.6]', 'offset', 'f0', 'a constant force of')])
+@pytest.mark.parametrize('seed', [1, 2])
+def test_a_missing_level_is_said_as_that_level(label, effect, key, words, seed):
+    """A residual that is mostly one level is described by it, not by its departures.
+
+    From a bare model, the refit leaves the whole friction (or the whole offset): every
+    bin of whatever the scan sees it against holds the same level.  Described by its
+    largest departure, a missing Coulomb level of 13.5 N on the ball-screw read
+    "friction higher by 0.829 N at drive forces 1.0–4.8 N — 100 % of the residual …;
+    load_friction has this shape".
+    """
+    from motor_comp.workbench import diagnose, kinematics
+    from motor_comp.workbench.session import default_hold
+    case = next(c for c in COMPLETE_CASES if c.label == label)
+    gen = case.make(seed, duration=DURATION)
+    start = as_model(case.start(gen.truth), source='start')
+    kin = kinematics(gen.run, hold=default_hold(start))
+    top = diagnose(kin, start).unexplained.features[0]
+    truth = gen.truth['effects'][effect][key]
+    assert top.shape_of == effect, top.text
+    assert top.text.startswith(words), top.text
+    assert top.level == pytest.approx(truth if effect == 'offset' else abs(truth), rel=0.02)
+    assert top.share > 0.9
