@@ -268,7 +268,7 @@ class Search:
 
         def weighted(trial: dict) -> float:
             dt = design(self.data, self.spec.with_(self.name, trial), self.model)
-            Z = np.column_stack([dt.X, dt.y])
+            Z = np.column_stack(dt.cols + [dt.y])    # not via dt.X: one stack, not two
             if self.rows is not None:
                 Z = Z[self.rows]
             Z *= sw[:, None]
