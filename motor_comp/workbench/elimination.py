@@ -22,7 +22,8 @@ from motor_comp.physics.effects import TERMS
 from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.library import ORDER, Spec, context, n_params, owned_columns
 from motor_comp.workbench.result import Estimate, estimate
-from motor_comp.workbench.varpro import cv_design, refine_structure, search, searched
+from motor_comp.workbench.heldout import cv_design
+from motor_comp.workbench.varpro import refine_structure, search, searched
 
 if TYPE_CHECKING:
     from motor_comp.workbench.selection import Engine

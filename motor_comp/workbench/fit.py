@@ -26,7 +26,8 @@ from motor_comp.workbench.reweight import reweighted
 from motor_comp.workbench.scan import scan
 from motor_comp.workbench.uncertainty import measurement_spread, processing_spread, \
     profile_se
-from motor_comp.workbench.varpro import cv_design, search, searched
+from motor_comp.workbench.heldout import cv_design
+from motor_comp.workbench.varpro import search, searched
 from motor_comp.workbench.wording import MASS, REFIT, common_scale, experiment_notes, \
     identifiability_notes, model_scalars, params_text, rows_name, scale_forces, \
     significant_changes

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Sequence
 from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.library import candidates, n_params
 from motor_comp.workbench.result import CandidateResult, estimate
-from motor_comp.workbench.varpro import cv_design
+from motor_comp.workbench.heldout import cv_design
 
 if TYPE_CHECKING:
     from motor_comp.workbench.result import Estimate

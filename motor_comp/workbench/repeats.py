@@ -3,7 +3,7 @@
 A term that declares a period (``Term.repeats_every``: the ripple) claims that a force
 fitted on some periods of the travel predicts the others; a shape at one place (a bump
 the library lacks, drawn by harmonics) does not.  :func:`block_cv` measures the claim
-for :func:`.varpro.cv_candidate`, from the term's declaration alone.
+for :func:`.heldout.cv_candidate`, from the term's declaration alone.
 """
 from __future__ import annotations
 

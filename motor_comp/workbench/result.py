@@ -24,7 +24,7 @@ from motor_comp.workbench.library import Spec, context, design, encode, n_params
 from motor_comp.workbench.lsq import solve_gram
 from motor_comp.workbench.uncertainty import block_sandwich, correlations, jacobian, \
     sandwich, scalars_and_se
-from motor_comp.workbench.varpro import cv_design
+from motor_comp.workbench.heldout import cv_design
 from motor_comp.workbench.wording import MASS, REFIT, ROTARY_UNITS, TITLES, fmt_param, more_words
 
 

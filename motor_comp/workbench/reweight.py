@@ -30,7 +30,8 @@ from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.library import Spec, design, n_params
 from motor_comp.workbench.lsq import bic, solve_gram, sse_with
 from motor_comp.workbench.result import Estimate, estimate
-from motor_comp.workbench.varpro import cv_design, search
+from motor_comp.workbench.heldout import cv_design
+from motor_comp.workbench.varpro import search
 
 
 def reweighted(eng: Any, est: Estimate) -> tuple[Estimate, str, list[str]] | None:

@@ -84,7 +84,8 @@ from motor_comp.workbench.lookahead import pair, simpler
 from motor_comp.workbench.lsq import bic
 from motor_comp.workbench.result import CandidateResult, Estimate, estimate
 from motor_comp.workbench.elimination import Step, backward, prune, vector as _vector
-from motor_comp.workbench.varpro import cv_candidate, cv_design, refine_structure, search
+from motor_comp.workbench.heldout import cv_candidate, cv_design
+from motor_comp.workbench.varpro import refine_structure, search
 from motor_comp.workbench.wording import MASS, REFIT, ParameterChange, axis_units, \
     common_scale, model_scalars, params_text, scale_forces, significant_changes
 

@@ -182,7 +182,7 @@ def test_a_candidate_fitted_outside_its_domain_is_not_chosen_in_fold(sweep_engin
     here: it is asked of every candidate the screen passes).  One that is not refused is
     chosen in-fold as before.
     """
-    from motor_comp.workbench.varpro import cv_candidate, cv_design
+    from motor_comp.workbench.heldout import cv_candidate, cv_design
     eng = sweep_engine
     base = eng.joined(eng.score(eng.h0(eng.model), 'coulomb'))
     D = eng.data_for(base.spec)
