@@ -27,6 +27,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from motor_comp.physics.axis import Units
+from motor_comp.physics.effects import TERMS
 from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.library import Spec, design, given_residual, spec_of
 from motor_comp.workbench.lsq import solve_gram
@@ -40,12 +41,23 @@ FEATURE_SHARE = 0.05
 NEAR_FLOOR = 1.5
 #: bin counts tried for the step functions
 BINS = (4, 8, 16, 32)
-#: library effects with the shape of a structure (against, odd) → effect
-SHAPES = {('position', True): 'position_friction', ('force', True): 'load_friction',
-          ('velocity', True): 'stribeck', ('position', False): 'ripple'}
-#: library effects with the shape of a constant level, whatever it is seen against: a
-#: friction level (odd) or a force of one sign (even)
-LEVEL_SHAPES = {True: 'coulomb', False: 'offset'}
+
+
+def shape_of(against: str, odd: bool, trend: int = 0, level: bool = False) -> str:
+    """Return the library effect whose declared shape a feature has ('' when none).
+
+    The terms declare their own (:class:`~motor_comp.physics.effects.identification.
+    Shape`): a feature against a variable with this parity, and rising (+1), falling
+    (−1) or neither (0) along it, or a constant level.  A rise of friction with speed
+    is a viscous slope's shape, a fall from the lowest speeds a Stribeck excess's —
+    told apart by the trend, where one map of (variable, parity) said "Stribeck" for
+    both (a missing viscous slope, 27 N at 171–300 mm/s, was hinted as ``fit --add
+    stribeck`` while the candidates ranked viscous first at 97 %).
+    """
+    for name, t in TERMS.items():
+        if t.shape is not None and t.shape.matches(against, odd, trend, level):
+            return name
+    return ''
 
 
 @dataclasses.dataclass(frozen=True)
@@ -73,6 +85,10 @@ class Feature:
         Its level [N or N·m] when it is mostly one (the median of its mean over the
         bins, holding more of its energy than the departures from it): a friction
         level when odd, a force of one sign when not; 0 otherwise and for a tone.
+    trend : int
+        +1 when its largest departure is a rise towards the top of what it is seen
+        against (|speed|, |force| for a friction), −1 a fall from the bottom (higher at
+        the lowest speeds), 0 when the departure touches neither end or both.
     """
 
     against: str
@@ -83,6 +99,7 @@ class Feature:
     text: str
     shape_of: str = ''
     level: float = 0.0
+    trend: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         """Return the JSON form (DESIGN.md §6 ``features`` entry)."""
@@ -90,7 +107,7 @@ class Feature:
                 'where': [float(self.where[0]), float(self.where[1])],
                 'share': float(self.share), 'amplitude': float(self.amplitude),
                 'text': self.text, 'shape_of': self.shape_of or None,
-                'level': float(self.level)}
+                'level': float(self.level), 'trend': int(self.trend)}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -336,10 +353,15 @@ def _level(means: np.ndarray, counts: np.ndarray) -> float:
     return base if base * base * float(counts.sum()) >= dep else 0.0
 
 
-def _where(edges: np.ndarray, means: np.ndarray) -> tuple[float, float, float]:
-    """Return the span where a step function departs most from its typical level."""
+def _where(edges: np.ndarray, means: np.ndarray) -> tuple[float, float, float, int]:
+    """Return the span where a step function departs most from its typical level.
+
+    Also its trend (:attr:`Feature.trend`): a departure that reaches the last bin and
+    not the first rises towards the top when it is higher (+1), one that reaches the
+    first and not the last falls from the bottom when it is higher (−1).
+    """
     if len(means) == 0:
-        return 0.0, 0.0, 0.0
+        return 0.0, 0.0, 0.0, 0
     base = float(np.median(means))
     dev = means - base
     k = int(np.argmax(np.abs(dev)))
@@ -349,12 +371,24 @@ def _where(edges: np.ndarray, means: np.ndarray) -> tuple[float, float, float]:
         lo -= 1
     while hi < len(dev) - 1 and sign * dev[hi + 1] > 0.5 * abs(dev[k]):
         hi += 1
-    return float(edges[lo]), float(edges[hi + 1]), float(dev[k])
+    first, last = lo == 0, hi == len(dev) - 1
+    trend = int(sign) if last and not first else -int(sign) if first and not last else 0
+    return float(edges[lo]), float(edges[hi + 1]), float(dev[k]), trend
+
+
+def _rank(verdicts: Mapping[str, Any] | None, name: str) -> tuple:
+    """Return how the candidates rank ``name``: paying (by share explained), unscored, not."""
+    if not name:
+        return (-1, 0.0)
+    v = (verdicts or {}).get(name)
+    if v is None:
+        return (1, 0.0)
+    return (2 if v.supported else 0, float(v.explained))
 
 
 def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: float,
           units: Units, shape: str, refused: str = '', inside: str = '',
-          level: float = 0.0) -> str:
+          level: float = 0.0, alike: str = '') -> str:
     kind = 'friction' if odd else 'force'
     way = 'higher' if amp > 0 else 'lower'
     # a bin edge at zero comes out of the quantiles as a rounding (2e-16 mm/s): it is 0
@@ -379,7 +413,10 @@ def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: floa
         body += ', the same sign both ways'
     if level:
         # mostly one level: that first, its largest departure besides
-        if not odd:
+        if alike:
+            # one way only: a friction level and a constant force are the same level
+            head = f'a constant level of {level:.3g} {units.force}'
+        elif not odd:
             head = f'a constant force of {level:.3g} {units.force}'
         elif level > 0:
             head = f'a friction level of {level:.3g} {units.force}'
@@ -387,15 +424,17 @@ def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: floa
             head = f'friction lower by {-level:.3g} {units.force} all along'
         body = head + (f', {way} by {abs(amp):.3g} {units.force} {span}'
                        if abs(amp) >= 0.1 * abs(level) else '')
+    also = f', as has {alike} on this run, which moves one way only' if alike else ''
     if shape and refused:
         # the candidates' verdict on this model stands over the scan's shape hint
-        tail = f'; the library\'s {shape} has this shape, but does not pay here: {refused}'
+        tail = (f'; the library\'s {shape} has this shape{also}, but does not pay here: '
+                f'{refused}')
     elif shape:
-        tail = f'; the library\'s {shape} has this shape (motor-comp fit --add {shape})'
+        tail = f'; the library\'s {shape} has this shape{also} (motor-comp fit --add {shape})'
     elif inside:
         # the model's own term of this shape leaves it: its law does not follow what is
         # here, and what it fitted may stand in for part of it
-        tail = (f'; the model\'s {inside} has this shape and leaves this: as fitted it '
+        tail = (f'; the model\'s {inside} has this shape{also} and leaves this: as fitted it '
                 f'does not follow it, or it stands in for something else of this shape')
     else:
         tail = '; no effect in the library has this shape'
@@ -441,6 +480,7 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
     cur = r.copy()
     used: set = set()
     tvar = vars_['time']
+    one_way = data.summary.direction != 0
     for _ in range(4):
         best = None
         scans = _scans(vars_, cur, data.fold, data.folds) if feats else real
@@ -473,12 +513,18 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
                                  'floor; no effect in the library has this shape'))
             cur = cur - means
             continue
-        lo, hi, amp = _where(edges, means)
+        lo, hi, amp, trend = _where(edges, means)
         z = vars_[against]
         z = np.abs(z) if odd and against in ('velocity', 'force') else z
         idx = np.clip(np.searchsorted(edges, z, side='right') - 1, 0, len(means) - 1)
         level = _level(means, np.bincount(idx[np.isfinite(z)], minlength=len(means)))
-        shape = LEVEL_SHAPES[odd] if level else SHAPES.get(key, '')
+        shape = shape_of(against, odd, trend, bool(level))
+        # on a run that moves one way a force and a friction of the same profile are
+        # one column: the term of the other parity has the shape as much, and the
+        # candidates' ranking (what pays, then what explains more) says which to name
+        alike = shape_of(against, not odd, trend, bool(level)) if one_way else ''
+        if alike and _rank(verdicts, alike) > _rank(verdicts, shape):
+            shape, alike = alike, shape
         inside = shape if shape in spec.names else ''
         if inside:
             shape = ''
@@ -487,7 +533,7 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
             verdict.why_not or 'it does not pay for its parameters on held-out data')
         feats.append(Feature(against, odd, (lo, hi), beyond, abs(amp),
                              _text(against, odd, lo, hi, amp, beyond, units, shape, refused,
-                                   inside, level), shape, level))
+                                   inside, level, alike), shape, level, trend))
         step = means[idx] * (vars_['speed_sign'] if odd else 1.0)
         cur = cur - np.where(np.isfinite(step), step, 0.0)
     near = math.isfinite(fnr) and nrmse <= NEAR_FLOOR * fnr
@@ -518,5 +564,5 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
                        input_noise_force=sig, input_noise_nrmse=part_in)
 
 
-__all__ = ['FEATURE_SHARE', 'Feature', 'LEVEL_SHAPES', 'NEAR_FLOOR', 'Profile', 'Unexplained',
-           'heldout_residual', 'scan']
+__all__ = ['FEATURE_SHARE', 'Feature', 'NEAR_FLOOR', 'Profile', 'Unexplained',
+           'heldout_residual', 'scan', 'shape_of']

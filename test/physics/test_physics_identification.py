@@ -227,3 +227,40 @@ def test_gms_columns_times_the_levels_are_the_effects_own_law():
     got = block @ np.array([coef[c.label] for c in cols])
     want = gms.force_along(x, dt, fc=fc, fs=18.0, vs=1e-3, delta=1.0)
     assert np.max(np.abs(got - want)) < 1e-9 * np.max(np.abs(want))
+
+
+def test_declared_shapes_name_one_term_each_and_say_what_the_law_does():
+    """A residual's shape points to one term, and the term's law has that shape.
+
+    Two terms declaring one shape would leave the scan's hint to the order of the
+    vocabulary.  The trend is checked against the law: a viscous force grows with
+    speed, a Stribeck excess falls from the lowest speeds.
+    """
+    from motor_comp.physics.effects.identification import Shape
+    shapes = [(n, t.shape) for n, t in TERMS.items() if t.shape is not None]
+    keys = [(s.against, s.odd, s.trend) for _, s in shapes]
+    assert len(keys) == len(set(keys)), keys
+    assert {n for n, _ in shapes} >= {'coulomb', 'offset', 'viscous', 'stribeck', 'ripple',
+                                      'load_friction', 'position_friction'}
+    v = np.array([1e-4, 1e-3, 1e-2, 0.1, 0.3])
+    visc = make_effect('viscous', {'fv': 100.0})
+    strb = make_effect('stribeck', {'fs': 20.0, 'vs': 1e-3, 'delta': 1.0})
+    fv = visc.force(np.zeros_like(v), v)
+    fs = strb.force(np.zeros_like(v), v, fc=5.0)
+    assert np.all(np.diff(fv) > 0) and TERMS['viscous'].shape.trend == 1
+    assert np.all(np.diff(fs) < 0) and TERMS['stribeck'].shape.trend == -1
+    with pytest.raises(ValueError, match='against'):
+        Shape('time', odd=True)
+    with pytest.raises(ValueError, match='trend'):
+        Shape('velocity', odd=True, trend=2)
+
+
+@pytest.mark.parametrize('against, odd, trend, level, want', [
+    ('velocity', True, 1, False, 'viscous'), ('velocity', True, -1, False, 'stribeck'),
+    ('velocity', True, 0, False, ''), ('force', True, 1, False, 'load_friction'),
+    ('position', True, 0, False, 'position_friction'), ('position', False, -1, False, 'ripple'),
+    ('velocity', True, 1, True, 'coulomb'), ('time', False, 0, True, 'offset'),
+    ('time', True, 1, False, ''), ('reversal', True, 0, False, '')])
+def test_the_scan_names_the_term_whose_shape_a_feature_has(against, odd, trend, level, want):
+    from motor_comp.workbench.scan import shape_of
+    assert shape_of(against, odd, trend, level) == want

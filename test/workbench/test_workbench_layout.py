@@ -18,7 +18,7 @@ WORKBENCH = Path(__file__).resolve().parents[2] / 'motor_comp' / 'workbench'
 #: the modules whose decisions must follow from the terms' declarations alone
 GENERIC = ('selection.py', 'elimination.py', 'lookahead.py', 'varpro.py', 'library.py', 'lsq.py',
            'dataset.py', 'parts.py', 'repeats.py', 'reweight.py', 'uncertainty.py', 'result.py',
-           'floor.py', 'bands.py')
+           'floor.py', 'bands.py', 'scan.py', 'heldout.py')
 
 
 @pytest.mark.parametrize('path', sorted(WORKBENCH.glob('*.py')), ids=lambda p: p.name)

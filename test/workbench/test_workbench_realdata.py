@@ -134,3 +134,29 @@ def test_odrive_one_direction_friction_is_coulomb(odrive):
     """A run that never reverses cannot show direction dependence: coulomb, not asymmetry."""
     eff = odrive.model.to_dict()['effects']
     assert 'coulomb' in eff and 'asymmetry' not in eff, eff
+
+
+@pytest.mark.parametrize('name', HSM_RUNS)
+def test_a_one_way_runs_level_names_what_the_candidates_rank_and_its_twin(name):
+    """On a run that turns one way a friction level and a constant torque are one column.
+
+    The scan sees the missing friction of the bare model as a level; of the two terms
+    with that shape it must name the one the candidates rank higher (Coulomb, which
+    pays; an offset is no candidate on a one-way run) and say that the other (offset)
+    has the shape as much on this run.  It named ``offset`` alone while the candidates
+    put Coulomb first at 98 % (on the positive run).
+    """
+    from motor_comp.logs.importers import import_table
+    from motor_comp.physics.axis import AxisModel
+    from motor_comp.workbench import diagnose, kinematics
+    kin = kinematics(import_table(DATA / 'hsm150' / f'{name}.mat', time='0', position='2',
+                                  input='4', name=name), hold='zoh')
+    start = AxisModel.from_dict({'axis': 'rotary', 'input': 'force', 'input_gain': 1.0,
+                                 'mass': 2 * J0, 'effects': {}})
+    d = diagnose(kin, start)
+    top = d.unexplained.features[0]
+    paying = {c.effect for c in d.candidates if c.supported}
+    assert 'coulomb' in paying and 'offset' not in paying, paying
+    assert top.level != 0.0 and top.shape_of == 'coulomb', top.text
+    assert 'as has offset on this run, which moves one way only' in top.text, top.text
+    assert top.text.startswith('a constant level of'), top.text

@@ -9,7 +9,7 @@ from numba import njit
 
 from motor_comp.errors import check_nonnegative
 from motor_comp.physics.effects.base import Effect
-from motor_comp.physics.effects.identification import Column, Context, Term
+from motor_comp.physics.effects.identification import Column, Context, Shape, Term
 
 
 @njit(cache=True)
@@ -57,6 +57,8 @@ class CoulombTerm(Term):
     """
 
     name = 'coulomb'
+    #: in a residual's scan: a friction level, the same at every speed
+    shape = Shape(None, odd=True)
     effect = Coulomb
     dry_friction = True
     force_scaled = (('coulomb', 'fc'),)

@@ -294,6 +294,47 @@ class Param:
 Constraint = tuple
 
 
+@dataclasses.dataclass(frozen=True)
+class Shape:
+    """How a term's force shows in the structure scan of a residual (its "shape").
+
+    The scan (:mod:`motor_comp.workbench.scan`) describes what a model leaves as step
+    functions against position, speed, drive force, time…; a feature with the shape
+    a term declares is said to have that term's shape (and which term is the user's
+    to add, or the model's own that does not follow it).
+
+    Attributes
+    ----------
+    against : str or None
+        ``position``, ``velocity`` or ``force``: what the force is a function of;
+        None for a constant level, seen the same against anything.
+    odd : bool
+        It flips with the direction of motion (a friction).
+    trend : int
+        Along ``|against|`` for an odd shape, ``against`` for an even one: +1 the
+        force grows (a viscous slope with speed), −1 it falls (a Stribeck excess above
+        the Coulomb level, largest at low speed), 0 no direction (a structure along the
+        travel).
+    """
+
+    against: str | None
+    odd: bool
+    trend: int = 0
+
+    def __post_init__(self) -> None:
+        if self.against not in (None, 'position', 'velocity', 'force'):
+            raise ValueError(f'a shape is against position, velocity or force, not '
+                             f'{self.against!r}')
+        if self.trend not in (-1, 0, 1):
+            raise ValueError(f'a shape\'s trend is -1, 0 or +1, not {self.trend!r}')
+
+    def matches(self, against: str, odd: bool, trend: int, level: bool) -> bool:
+        """Whether a feature seen ``against`` with this parity, trend and level has it."""
+        if level or self.against is None:
+            return level and self.against is None and self.odd == odd
+        return self.against == against and self.odd == odd and self.trend in (0, trend)
+
+
 class Term:
     """Base class of the identification declarations of one effect.
 
@@ -333,6 +374,8 @@ class Term:
     #: reported scalar that sets the effect's shape and the value at which the effect
     #: vanishes, e.g. ``('tau', 0.0)`` (None: the effect vanishes with its coefficients)
     null: ClassVar[tuple | None] = None
+    #: how its force shows in a residual's structure scan (None: no step function's)
+    shape: ClassVar[Shape | None] = None
 
     @property
     def kind(self) -> EffectKind:
@@ -456,4 +499,4 @@ class Term:
 
 
 __all__ = ['MASS', 'Column', 'Constraint', 'Context', 'Evidence', 'LocalBasis', 'Param', 'Path',
-           'Signal', 'Summary', 'Term']
+           'Shape', 'Signal', 'Summary', 'Term']

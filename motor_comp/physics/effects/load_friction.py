@@ -36,7 +36,7 @@ from numba import njit
 
 from motor_comp.errors import ParameterError, check_nonnegative
 from motor_comp.physics.effects.base import Effect
-from motor_comp.physics.effects.identification import Column, Context, Term
+from motor_comp.physics.effects.identification import Column, Context, Shape, Term
 
 
 @njit(cache=True, inline='always', error_model='numpy')
@@ -161,6 +161,8 @@ class LoadFrictionTerm(Term):
     """
 
     name = 'load_friction'
+    #: in a residual's scan: a friction growing with the drive force
+    shape = Shape('force', odd=True, trend=1)
     effect = LoadFriction
     requires = ('coulomb',)
     dry_friction = True

@@ -8,7 +8,7 @@ import numpy as np
 
 from motor_comp.errors import check_finite
 from motor_comp.physics.effects.base import Effect
-from motor_comp.physics.effects.identification import Column, Context, Term
+from motor_comp.physics.effects.identification import Column, Context, Shape, Term
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,6 +55,8 @@ class OffsetTerm(Term):
     """Identification of a constant force ``f0``: the constant column (needs both ways)."""
 
     name = 'offset'
+    #: in a residual's scan: a force of one sign, the same everywhere
+    shape = Shape(None, odd=False)
     effect = Offset
     both_directions = True
     force_scaled = (('offset', 'f0'),)

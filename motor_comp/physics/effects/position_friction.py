@@ -45,8 +45,8 @@ from numba import njit
 from motor_comp.errors import ParameterError, check_finite
 from motor_comp.physics import aot
 from motor_comp.physics.effects.base import Effect
-from motor_comp.physics.effects.identification import Column, Context, LocalBasis, Summary, \
-    Term
+from motor_comp.physics.effects.identification import Column, Context, LocalBasis, Shape, \
+    Summary, Term
 
 #: largest number of knots the compiled kernels carry
 MAX_KNOTS = 32
@@ -461,6 +461,8 @@ class PositionFrictionTerm(Term):
     """
 
     name = 'position_friction'
+    #: in a residual's scan: a friction that varies along the travel
+    shape = Shape('position', odd=True)
     effect = PositionFriction
     requires = ('coulomb',)
     dry_friction = True

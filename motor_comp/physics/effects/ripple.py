@@ -14,7 +14,7 @@ from numba import njit
 from motor_comp.errors import ParameterError, check_finite, check_positive
 from motor_comp.physics import aot
 from motor_comp.physics.effects.base import Effect
-from motor_comp.physics.effects.identification import Column, Context, Param, Summary, Term
+from motor_comp.physics.effects.identification import Column, Context, Param, Shape, Summary, Term
 
 #: largest number of harmonics the compiled kernels carry
 MAX_HARMONICS = 16
@@ -239,6 +239,8 @@ class RippleTerm(Term):
     """
 
     name = 'ripple'
+    #: in a residual's scan: a force that varies along the travel, either way of motion
+    shape = Shape('position', odd=False)
     effect = Ripple
     params = ('period',)
     force_scaled = (('ripple', 'amplitude_1'),)

@@ -18,7 +18,7 @@ from motor_comp.errors import ParameterError, check_nonnegative, check_positive
 from motor_comp.physics import aot
 from motor_comp.physics.effects.base import Effect
 from motor_comp.physics.effects.identification import Column, Context, Evidence, Param, \
-    Summary, Term
+    Shape, Summary, Term
 
 
 @aot.ahead(aot.F8_1D, aot.F8)
@@ -124,6 +124,8 @@ class StribeckTerm(Term):
     """
 
     name = 'stribeck'
+    #: in a residual's scan: a friction excess that falls with speed from the lowest
+    shape = Shape('velocity', odd=True, trend=-1)
     effect = Stribeck
     requires = ('coulomb',)
     #: it acts while the axis slides slowly: around the turns

@@ -9,7 +9,7 @@ from numba import njit
 
 from motor_comp.errors import check_nonnegative
 from motor_comp.physics.effects.base import Effect
-from motor_comp.physics.effects.identification import Column, Context, Signal, Term
+from motor_comp.physics.effects.identification import Column, Context, Shape, Signal, Term
 
 
 @njit(cache=True)
@@ -48,6 +48,8 @@ class ViscousTerm(Term):
     """Identification of viscous friction: ``fv ≥ 0`` on the velocity the stencil sees."""
 
     name = 'viscous'
+    #: in a residual's scan: a friction growing with speed
+    shape = Shape('velocity', odd=True, trend=1)
     effect = Viscous
     force_scaled = (('viscous', 'fv'),)
 
