@@ -2,10 +2,11 @@
 
 A model that fits is not a model that is complete.  The final model's *held-out*
 residual (each fold's samples predicted by the parameters fitted on the others) is
-regressed on a smooth function of one variable at a time — position, velocity, the drive
-force (the load), time since the start, time since the last reversal — both as a force
-and as a friction (the residual times the direction of motion, which a friction flips
-with), and its time spectrum is searched for a peak (Welch).  The smooth function is a
+regressed on a smooth function of one variable at a time — position, speed, the
+magnitude of the drive force (the load), time since the start, time since the last
+reversal — both as a force and as a friction (the residual times the direction of
+motion, which a friction flips with), and its time spectrum is searched for a peak
+(Welch).  The smooth function is a
 step function over equal-count bins, its bin count chosen by held-out share (4–32 bins);
 the share is the held-out fraction of the residual's energy it removes.
 
@@ -271,12 +272,13 @@ def _scans(vars_: dict, r: np.ndarray, fold: np.ndarray, folds: int) -> dict:
     rows = _fold_rows(fold, folds)
     for name in ('position', 'velocity', 'force', 'time', 'reversal'):
         z = vars_[name]
-        plain = _Bins(z, rows)
+        # speed and load by magnitude for both parts: the residual as a force the same
+        # both ways (even) and as a friction (odd) — against the signed velocity the
+        # "even" scan held any function of it, a Coulomb step too, and won over the
+        # friction scan it contains (bench60's bare model: "force lower by 18.1 N at
+        # velocities −486 to −47.5 mm/s, the same sign both ways" for a missing Coulomb)
+        zb = _Bins(np.abs(z), rows) if name in ('velocity', 'force') else _Bins(z, rows)
         for odd in (False, True):
-            if name in ('velocity', 'force'):
-                zb = _Bins(np.abs(z), rows) if odd else plain
-            else:
-                zb = plain
             rr = r * sgn if odd else r
             out[(name, odd)] = _best(zb, rr, fold, folds)
     return out
@@ -399,9 +401,9 @@ def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: floa
         span = f'over {k * lo:.4g}–{k * hi:.4g} {u} of the travel'
     elif against == 'velocity':
         k, u = (1e3, 'mm/s') if not units.rotary else (1.0, 'rad/s')
-        span = f'at {"speeds" if odd else "velocities"} {k * lo:.4g}–{k * hi:.4g} {u}'
+        span = f'at speeds {k * lo:.4g}–{k * hi:.4g} {u}'
     elif against == 'force':
-        span = f'at drive forces {"|F| " if odd else ""}{lo:.4g}–{hi:.4g} {units.force}'
+        span = f'at drive forces |F| {lo:.4g}–{hi:.4g} {units.force}'
     elif against == 'time':
         span = f'from {lo:.3g} s to {hi:.3g} s of the run (it changes over time)'
     elif against == 'reversal':
@@ -515,7 +517,7 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
             continue
         lo, hi, amp, trend = _where(edges, means)
         z = vars_[against]
-        z = np.abs(z) if odd and against in ('velocity', 'force') else z
+        z = np.abs(z) if against in ('velocity', 'force') else z
         idx = np.clip(np.searchsorted(edges, z, side='right') - 1, 0, len(means) - 1)
         level = _level(means, np.bincount(idx[np.isfinite(z)], minlength=len(means)))
         shape = shape_of(against, odd, trend, bool(level))
