@@ -6,9 +6,9 @@ regressed on a smooth function of one variable at a time — position, speed, th
 magnitude of the drive force (the load), time since the start, time since the last
 reversal — both as a force and as a friction (the residual times the direction of
 motion, which a friction flips with), and its time spectrum is searched for a peak
-(Welch).  The smooth function is a
-step function over equal-count bins, its bin count chosen by held-out share (4–32 bins);
-the share is the held-out fraction of the residual's energy it removes.
+(Welch).  The smooth function is a step function over equal-count bins, its bin count
+chosen by held-out share (4–32 bins); the share is the held-out fraction of the
+residual's energy it removes.
 
 The same scan is run on the residual the model leaves on its own anchored runs measured
 like this one (the noise floor's record, :mod:`.floor`): what the processing and the
@@ -88,8 +88,9 @@ class Feature:
         level when odd, a force of one sign when not; 0 otherwise and for a tone.
     trend : int
         +1 when its largest departure is a rise towards the top of what it is seen
-        against (|speed|, |force| for a friction), −1 a fall from the bottom (higher at
-        the lowest speeds), 0 when the departure touches neither end or both.
+        against (speed, the drive force's magnitude, position…), −1 a fall from the
+        bottom (higher at the lowest speeds), 0 when the departure touches neither end
+        or both.
     """
 
     against: str
@@ -379,13 +380,17 @@ def _where(edges: np.ndarray, means: np.ndarray) -> tuple[float, float, float, i
 
 
 def _rank(verdicts: Mapping[str, Any] | None, name: str) -> tuple:
-    """Return how the candidates rank ``name``: paying (by share explained), unscored, not."""
+    """Return how the candidates rank ``name``: paying (by share explained), not, unjudged.
+
+    A term the candidates did not score is one this run cannot judge (or one the model
+    holds); with no verdicts at all every term ranks alike.
+    """
     if not name:
         return (-1, 0.0)
     v = (verdicts or {}).get(name)
     if v is None:
-        return (1, 0.0)
-    return (2 if v.supported else 0, float(v.explained))
+        return (0, 0.0)
+    return (2 if v.supported else 1, float(v.explained))
 
 
 def _text(against: str, odd: bool, lo: float, hi: float, amp: float, share: float,
@@ -482,7 +487,7 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
     cur = r.copy()
     used: set = set()
     tvar = vars_['time']
-    one_way = data.summary.direction != 0
+    direction = int(data.summary.direction)     # 0: the runs move both ways
     for _ in range(4):
         best = None
         scans = _scans(vars_, cur, data.fold, data.folds) if feats else real
@@ -522,9 +527,11 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
         level = _level(means, np.bincount(idx[np.isfinite(z)], minlength=len(means)))
         shape = shape_of(against, odd, trend, bool(level))
         # on a run that moves one way a force and a friction of the same profile are
-        # one column: the term of the other parity has the shape as much, and the
-        # candidates' ranking (what pays, then what explains more) says which to name
-        alike = shape_of(against, not odd, trend, bool(level)) if one_way else ''
+        # one column: the term of the other parity has the shape as much (its step
+        # function the direction times this one: the trend too), and the candidates'
+        # ranking (what pays, then what explains more) says which to name
+        alike = shape_of(against, not odd, trend * direction, bool(level)) \
+            if direction else ''
         if alike and _rank(verdicts, alike) > _rank(verdicts, shape):
             shape, alike = alike, shape
         inside = shape if shape in spec.names else ''
