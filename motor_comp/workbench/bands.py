@@ -42,6 +42,17 @@ class SpeedWeights:
         if len(w) != len(self.edges) or not np.all(np.isfinite(w)) or np.any(w <= 0):
             raise ParameterError('speed weights must be finite and positive, one per band')
 
+    def at(self, speed: np.ndarray) -> np.ndarray:
+        """Return each row's weight, its band's, at velocity or speed ``speed``."""
+        band = _band(np.asarray(self.edges, dtype=float),
+                     np.abs(np.asarray(speed, dtype=float)))
+        return np.asarray(self.w, dtype=float)[band]
+
+
+def _band(edges: np.ndarray, speed: np.ndarray) -> np.ndarray:
+    """Return each speed's band: ``edges[i] ≤ speed < edges[i+1]`` is band ``i``."""
+    return np.clip(np.searchsorted(edges, speed, side='right') - 1, 0, len(edges) - 1)
+
 
 @dataclasses.dataclass(frozen=True)
 class SpeedBands:
@@ -68,16 +79,12 @@ class SpeedBands:
             return None
         edges = np.quantile(speed, np.linspace(0.0, 1.0, bands + 1)[:-1])
         edges[0] = 0.0
-        band = cls._band(edges, speed)
+        band = _band(edges, speed)
         count = np.bincount(band, minlength=bands)
         var = np.bincount(band, e * e, minlength=bands) / np.maximum(count, 1)
         if np.any(count == 0) or np.min(var) <= 0:
             return None
         return cls(edges, var)
-
-    @staticmethod
-    def _band(edges: np.ndarray, speed: np.ndarray) -> np.ndarray:
-        return np.clip(np.searchsorted(edges, speed, side='right') - 1, 0, len(edges) - 1)
 
     @property
     def contrast(self) -> float:
@@ -91,8 +98,7 @@ class SpeedBands:
 
     def row_weights(self, speed: np.ndarray) -> np.ndarray:
         """Return each row's weight (its band's) at ``|speed|``."""
-        w = np.asarray(self.weights.w)
-        return w[self._band(self.edges, np.abs(np.asarray(speed, dtype=float)))]
+        return self.weights.at(speed)
 
 
 __all__ = ['PROTECTED', 'SpeedBands', 'SpeedWeights', 'WEIGHT_BANDS', 'WEIGHT_CONTRAST']

@@ -378,12 +378,9 @@ class View:
         if self.weights is None:
             return None
         if self._sw is None:
-            edges = np.asarray(self.weights.edges, dtype=float)
-            w = np.asarray(self.weights.w, dtype=float)
             vl = self.data.at(width=self.width, tau=self.tau, model=self.model)\
                 .signal(Signal.VELOCITY)
-            band = np.clip(np.searchsorted(edges, np.abs(vl), side='right') - 1, 0, len(w) - 1)
-            self._sw = np.sqrt(w[band])
+            self._sw = np.sqrt(self.weights.at(vl))
         return self._sw
 
     def _weigh(self, a: np.ndarray) -> np.ndarray:

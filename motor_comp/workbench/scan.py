@@ -267,18 +267,25 @@ def _best(zb: _Bins, r: np.ndarray, fold: np.ndarray, folds: int) \
     return best
 
 
+def _scanned(name: str, z: np.ndarray) -> np.ndarray:
+    """Return what a variable is scanned against: speed and load by their magnitude.
+
+    For both parts, the residual as a force the same both ways (even) and as a
+    friction (odd): against the signed velocity the "even" scan held any function of
+    it, a Coulomb step too, and won over the friction scan it contains (bench60's bare
+    model: "force lower by 18.1 N at velocities −486 to −47.5 mm/s, the same sign both
+    ways" for a missing Coulomb level).
+    """
+    return np.abs(z) if name in ('velocity', 'force') else z
+
+
 def _scans(vars_: dict, r: np.ndarray, fold: np.ndarray, folds: int) -> dict:
     out = {}
     sgn = vars_['speed_sign']
     rows = _fold_rows(fold, folds)
     for name in ('position', 'velocity', 'force', 'time', 'reversal'):
         z = vars_[name]
-        # speed and load by magnitude for both parts: the residual as a force the same
-        # both ways (even) and as a friction (odd) — against the signed velocity the
-        # "even" scan held any function of it, a Coulomb step too, and won over the
-        # friction scan it contains (bench60's bare model: "force lower by 18.1 N at
-        # velocities −486 to −47.5 mm/s, the same sign both ways" for a missing Coulomb)
-        zb = _Bins(np.abs(z), rows) if name in ('velocity', 'force') else _Bins(z, rows)
+        zb = _Bins(_scanned(name, z), rows)
         for odd in (False, True):
             rr = r * sgn if odd else r
             out[(name, odd)] = _best(zb, rr, fold, folds)
@@ -521,8 +528,7 @@ def scan(data: Dataset, est: Any, floor: Any, *, units: Units,
             cur = cur - means
             continue
         lo, hi, amp, trend = _where(edges, means)
-        z = vars_[against]
-        z = np.abs(z) if against in ('velocity', 'force') else z
+        z = _scanned(against, vars_[against])
         idx = np.clip(np.searchsorted(edges, z, side='right') - 1, 0, len(means) - 1)
         level = _level(means, np.bincount(idx[np.isfinite(z)], minlength=len(means)))
         shape = shape_of(against, odd, trend, bool(level))
