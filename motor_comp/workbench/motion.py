@@ -131,15 +131,55 @@ def motor_position(kin: Kinematics, width: float, model: AxisModel,
     # implementation of the axis dynamics, stiction included) for the model at hand
     ends = np.append(starts[1:], len(pos))
     horizon = np.maximum(np.minimum(ends - starts, 3 * (stops - starts) + 2 * kin.window + 5),
-                         0)
-    n_sub = 10
-    P = pack_params(model.without('backlash', 'delay'), Sensors(encoder_resolution=0.0),
-                    kin.dt / n_sub)
-    S0 = initial_state(P, 0.0)
-    _flights_entry(P, S0, xm, np.ascontiguousarray(u, dtype=float), float(tau) / kin.dt,
-                   kin.hold is InputHold.SAMPLE, starts, rest, dirs, horizon.astype(np.int64),
-                   float(width), n_sub)
+                         0).astype(np.int64)
+    base = model.without('backlash', 'delay')
+    # each flight starts at rest against the old edge (the load rests at ``rest``)
+    x_start = rest - 0.5 * width * dirs
+    if any(e.position_dependent for e in base.effects):
+        _flights_entry(*_flight_setup(kin, base, u, tau), starts, x_start, dirs,
+                       np.full(len(starts), float(width)), horizon, xm)
+        return xm
+    # no force reads the absolute position: each flight is the same path from rest
+    # whatever the width (it ends where it has travelled the width), so the paths are
+    # integrated once for the model and delay and each width takes its prefixes (a
+    # width search tried ~10 widths a round, each integrating every flight)
+    path = _flight_paths(kin, base, u, float(tau), starts, dirs, horizon)
+    for j, k0 in enumerate(starts.tolist()):
+        seg = path[k0:k0 + horizon[j]]
+        past = np.flatnonzero(seg * dirs[j] >= width)
+        n = int(past[0]) if past.size else len(seg)
+        xm[k0:k0 + n] = x_start[j] + seg[:n]
     return xm
+
+
+def _flight_setup(kin: Kinematics, model: AxisModel, u: np.ndarray, tau: float) -> tuple:
+    """Return the kernel's leading arguments: packed model, state at rest, input, delay."""
+    n_sub = 10
+    P = pack_params(model, Sensors(encoder_resolution=0.0), kin.dt / n_sub)
+    return (P, initial_state(P, 0.0), np.ascontiguousarray(u, dtype=float),
+            float(tau) / kin.dt, kin.hold is InputHold.SAMPLE, n_sub)
+
+
+def _flight_paths(kin: Kinematics, model: AxisModel, u: np.ndarray, tau: float,
+                  starts: np.ndarray, dirs: np.ndarray, horizon: np.ndarray) -> np.ndarray:
+    """Return each flight's travel from rest over its whole horizon (0 elsewhere), cached.
+
+    Kept on the run's :class:`Kinematics` by model and delay (the last few), for the
+    input array it was integrated with.
+    """
+    cache = kin.__dict__.setdefault('_flight_paths', {})
+    key = (model, tau)
+    hit = cache.get(key)
+    if hit is not None and hit[0] is u:
+        return hit[1]
+    path = np.zeros(len(kin.position))
+    n = len(starts)
+    _flights_entry(*_flight_setup(kin, model, u, tau), starts, np.zeros(n), dirs,
+                   np.full(n, np.inf), horizon, path)
+    if len(cache) > 8:
+        cache.clear()
+    cache[key] = (u, path)
+    return path
 
 
 def _pauses(kin: Kinematics) -> tuple:
@@ -205,26 +245,25 @@ def _input_at(u, t, interpolate):
     return u[i]
 
 
-@aot.ahead(*(aot.F8_1D,) * 4, aot.F8, aot.BOOL, aot.I8_1D, aot.F8_1D, aot.F8_1D, aot.I8_1D,
-           aot.F8, aot.I8)
+@aot.ahead(aot.F8_1D, aot.F8_1D, aot.F8_1D, aot.F8, aot.BOOL, aot.I8, aot.I8_1D,
+           aot.F8_1D, aot.F8_1D, aot.F8_1D, aot.I8_1D, aot.F8_1D)
 @njit(cache=True)
-def _flights(P, S0, xm, u, shift, interpolate, starts, rest, dirs, horizon, width, n_sub):
-    # ``shift`` = τ/dt [samples]: the input of each sub-step is taken at its middle, τ
-    # earlier (a whole-sample shift would move every flight by up to half a sample)
-    half = 0.5 * width
+def _flights(P, S0, u, shift, interpolate, n_sub, starts, x_start, dirs, reach, horizon, xm):
+    # flight j starts at rest at ``x_start[j]`` and ends where it has travelled
+    # ``reach[j]`` in ``dirs[j]`` (the far edge) or after ``horizon[j]`` samples; ``shift``
+    # = τ/dt [samples]: the input of each sub-step is taken at its middle, τ earlier (a
+    # whole-sample shift would move every flight by up to half a sample)
     for j in range(starts.shape[0]):
         k0 = starts[j]
         S = S0.copy()
-        # at rest against the old edge: the load rests at ``rest``, the motor turns
-        x_start = rest[j] - half * dirs[j]
-        S[K.S_X] = x_start
-        S[K.S_XL] = x_start
+        S[K.S_X] = x_start[j]
+        S[K.S_XL] = x_start[j]
         S[K.S_V] = 0.0
         S[K.S_STUCK] = 1.0
         for step in range(horizon[j]):
             k = k0 + step
             # contact with the far edge: the load is taken along from here on
-            if (S[K.S_X] - rest[j]) * dirs[j] >= half:
+            if (S[K.S_X] - x_start[j]) * dirs[j] >= reach[j]:
                 break
             xm[k] = S[K.S_X]
             # sub-steps that see the same input go in one call (a held command changes

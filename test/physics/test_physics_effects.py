@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 from motor_comp.errors import ParameterError
 from motor_comp.physics import EFFECTS, VOCABULARY, make_effect
+from motor_comp.physics.effects import EffectKind
 from motor_comp.physics.effects import Backlash, Coulomb, Delay, Ripple, Stribeck, Viscous
 from motor_comp.physics.effects.backlash import play
 
@@ -105,23 +106,57 @@ def test_unknown_effect_is_named():
         make_effect('cogging', {})
 
 
+#: every effect with parameters that make its law act
+EXAMPLES = {
+    'coulomb': {'fc': 3.5}, 'viscous': {'fv': 12.0},
+    'stribeck': {'fs': 7.0, 'vs': 0.002, 'delta': 1.5},
+    'presliding': {'alpha': [0.6, 0.4], 'k': [2e6, 5e5], 'C': 5000.0,
+                   'sigma': [200.0, 50.0]},
+    'ripple': {'period': 0.016, 'harmonics': [[1.0, -2.0], [0.5, 0.25]]},
+    'offset': {'f0': -4.0}, 'spring': {'k': 250.0, 'x0': 0.01},
+    'asymmetry': {'dfc': 1.5, 'dfv': -3.0}, 'delay': {'tau': 0.002},
+    'backlash': {'width': 5e-6}, 'gravity': {'mgl': 3.0, 'q0': -0.5},
+    'load_friction': {'mu': 0.15},
+    'position_friction': {'x': [-0.05, 0.0, 0.012, 0.1], 'dfc': [0.0, 2.5, -1.0, 0.5]},
+}
+
+
 @pytest.mark.parametrize('name', VOCABULARY)
 def test_params_round_trip_through_the_model_file_form(name):
-    examples = {
-        'coulomb': {'fc': 3.5}, 'viscous': {'fv': 12.0},
-        'stribeck': {'fs': 7.0, 'vs': 0.002, 'delta': 1.5},
-        'presliding': {'alpha': [0.6, 0.4], 'k': [2e6, 5e5], 'C': 5000.0,
-                       'sigma': [200.0, 50.0]},
-        'ripple': {'period': 0.016, 'harmonics': [[1.0, -2.0], [0.5, 0.25]]},
-        'offset': {'f0': -4.0}, 'spring': {'k': 250.0, 'x0': 0.01},
-        'asymmetry': {'dfc': 1.5, 'dfv': -3.0}, 'delay': {'tau': 0.002},
-        'backlash': {'width': 5e-6}, 'gravity': {'mgl': 3.0, 'q0': -0.5},
-        'load_friction': {'mu': 0.15},
-        'position_friction': {'x': [-0.05, 0.0, 0.012, 0.1], 'dfc': [0.0, 2.5, -1.0, 0.5]},
-    }
-    e = make_effect(name, examples[name])
-    assert e.params() == examples[name]
+    e = make_effect(name, EXAMPLES[name])
+    assert e.params() == EXAMPLES[name]
     assert make_effect(name, e.params()) == e
+
+
+@pytest.mark.parametrize('name', VOCABULARY)
+def test_an_effect_declares_whether_its_force_reads_the_position(name):
+    """The same motion elsewhere on the travel meets the same force unless declared.
+
+    A backlash gap's flights are integrated once for every width when no force of the
+    model reads the position (:func:`motor_comp.workbench.motion.motor_position`).
+    """
+    e = make_effect(name, EXAMPLES[name])
+    if e.kind is not EffectKind.FORCE:
+        assert not e.position_dependent
+        return
+    t = np.linspace(0.0, 2.0, 4001)
+    x = 0.02 * np.sin(2.0 * np.pi * t) - 0.01
+    v = np.gradient(x, t)
+    f_in = 40.0 * np.cos(3.0 * t)
+    moved = {}
+    for shift in (0.0, 0.037):
+        if name == 'presliding':
+            moved[shift] = e.force_along(x + shift, float(t[1] - t[0]), fc=3.5)
+        elif name == 'load_friction':
+            moved[shift] = e.force(x + shift, v, f_in=f_in)
+        else:
+            moved[shift] = e.force(x + shift, v)
+    # (to the rounding of a shifted coordinate: a stiff element's force is k times a
+    # difference of positions)
+    scale = float(np.max(np.abs(moved[0.0])))
+    differs = not np.allclose(moved[0.0], moved[0.037], rtol=0.0, atol=1e-9 * scale)
+    assert scale > 0.0, name
+    assert differs == e.position_dependent, name
 
 
 # ---- friction laws -------------------------------------------------------------------

@@ -71,3 +71,29 @@ def test_fitted_width_is_unbiased():
     # measured −1.8, +0.2, +0.2, +3.8, −3.2, −0.0 % (before: −64, −34, −62, −31, −46, −34 %)
     assert np.all(np.abs(errs) < 0.12), errs
     assert abs(float(np.mean(errs))) < 0.05, errs
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_flight_is_one_path_for_every_width(seed):
+    """Without a force that reads the position, every width takes one integrated path.
+
+    The same model with a zero ripple (a force declared to read the position, so each
+    width integrates its own flights from its own start) gives the same motor position
+    at every width to rounding, and the paths are integrated once for all the widths.
+    """
+    from motor_comp.physics.effects import Ripple
+    from motor_comp.workbench.motion import motor_position
+    gen, truth, true, kin = _run(seed)
+    tau = truth['effects']['delay']['tau']
+    assert not any(e.position_dependent for e in true.effects)
+    zero = true.with_effect(Ripple(period=0.01))
+    assert zero.get('ripple').position_dependent
+    w = truth['effects']['backlash']['width']
+    for width in (0.3 * w, w, 2.5 * w):
+        shared = motor_position(kin, width, true, kin.u, tau=tau)
+        own = motor_position(kin, width, zero, kin.u, tau=tau)
+        assert np.max(np.abs(shared - own)) < 1e-12 + 1e-9 * width, width
+        # between the edges in flight: not the load's position shifted by half the gap
+        flying = np.abs(np.abs(shared - kin.position) - 0.5 * width) > 0.1 * width
+        assert np.count_nonzero(flying) > 20, width
+    assert len(kin.__dict__['_flight_paths']) == 1

@@ -45,6 +45,11 @@ class Effect:
     #: both kinds except ``gravity`` (rotary only: on a linear axis gravity is an
     #: ``offset``).  No effect is linear-only today; the check in ``AxisModel`` is general.
     axes: ClassVar[frozenset] = BOTH_AXES
+    #: whether the force law reads the absolute position (a ripple, a spring, a friction
+    #: along the travel, gravity).  Without such a force the axis moves the same from
+    #: every start: a flight across a backlash gap is one path for every width
+    #: (:func:`motor_comp.workbench.motion.motor_position`).
+    position_dependent: ClassVar[bool] = False
 
     def params(self) -> dict[str, Any]:
         """Parameters in model-file form (DESIGN.md §6 table), SI units."""

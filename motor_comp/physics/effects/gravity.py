@@ -52,6 +52,7 @@ class Gravity(Effect):
     """
 
     name = 'gravity'
+    position_dependent = True
     title = 'gravity (unbalanced load)'
     axes = frozenset({AxisKind.ROTARY})
     mgl: float = 0.0

@@ -260,6 +260,7 @@ class PositionFriction(Effect):
     """
 
     name = 'position_friction'
+    position_dependent = True
     title = 'position-dependent friction'
     x: tuple
     dfc: tuple

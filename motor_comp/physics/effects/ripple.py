@@ -99,6 +99,7 @@ class Ripple(Effect):
     """
 
     name = 'ripple'
+    position_dependent = True
     title = 'force ripple'
     period: float = 0.02
     harmonics: tuple = ((0.0, 0.0),)

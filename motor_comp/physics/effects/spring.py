@@ -29,6 +29,7 @@ class Spring(Effect):
     """
 
     name = 'spring'
+    position_dependent = True
     title = 'spring (position-proportional force)'
     k: float = 0.0
     x0: float = 0.0
