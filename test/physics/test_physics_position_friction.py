@@ -340,3 +340,34 @@ def test_any_knots_give_a_model_or_a_one_line_parameter_error(x, dfc, fc):
     probe = np.concatenate([pf.knots, 0.5 * (pf.knots[1:] + pf.knots[:-1])])
     level = m.fc + m.dry_friction_shift(probe)
     assert np.all(np.isfinite(level)) and np.all(level >= -1e-9 * (np.abs(level).max() + 1))
+
+
+@FAST
+@given(n=st.integers(2, MAX_KNOTS), seed=st.integers(0, 2 ** 32 - 1),
+       fc=st.floats(0.0, 1e3), gms=st.booleans(),
+       extreme=st.sampled_from([0.0, 1.0]))
+def test_any_levels_the_estimator_can_reach_encode_to_a_model(n, seed, fc, gms, extreme):
+    """Levels anywhere within the bounds its columns declare encode to a valid model.
+
+    The estimator holds each fitted level within its column's bounds; whatever it
+    returns there (a near-collinear design puts it at a bound), the encoded effect — its
+    dip below zero friction lifted — is one the model file holds, never an input error.
+    """
+    from motor_comp.physics.effects import TERMS
+    from motor_comp.physics.effects.identification import Context
+    from motor_comp.physics.effects.position_friction import uniform_knots
+    term = TERMS['position_friction']
+    eta = {'x': uniform_knots(0.01, 0.2, n)}
+    present = frozenset({'coulomb', 'position_friction'} | ({'presliding'} if gms else set()))
+    ctx = Context(present=present, eta={'position_friction': eta})
+    cols = term.columns(eta, ctx)
+    rng = np.random.default_rng(seed)
+    lo, hi = np.array([c.lo for c in cols]), np.array([c.hi for c in cols])
+    assert np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))
+    # at the bounds (alternating: the deepest dips) or anywhere inside them
+    u = rng.integers(0, 2, len(cols)) if extreme else rng.uniform(0.0, 1.0, len(cols))
+    values = {('coulomb', 'fc'): fc}
+    values.update({('position_friction', c.label): float(a + w * (b - a))
+                   for c, a, b, w in zip(cols, lo, hi, u)})
+    (pf,) = term.encode(values, eta, ctx)
+    AxisModel(effects=(make_effect('coulomb', {'fc': fc}), pf))

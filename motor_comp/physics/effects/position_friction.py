@@ -518,8 +518,15 @@ class PositionFrictionTerm(Term):
         # the 0.59 s it took on the 60 s bench run, and built them in 0.15 s more
         def local(p: Any) -> LocalBasis:
             return pf.local_basis(p.x, p.fwd - p.bwd, first=1)
+        # its levels held inside the estimator to a quarter of what the effect holds, so
+        # that the lift of a spline's dip (:meth:`encode`; the spline through levels
+        # within ±L on the term's uniform knots stays within ±1.5 L) keeps them inside:
+        # knots over a stretch the run barely crosses leave near-collinear columns, and
+        # levels of 3e26 N reached the effect's own check as an input error (a search
+        # trial on the generator's GMS sine run, seed 4)
         return [Column(f'dfc{j}', ('position_friction', knots, j), block,
-                       width=len(knots) - 1, index=j - 1, local=local)
+                       width=len(knots) - 1, index=j - 1, local=local,
+                       lo=-0.25 * MAX_LEVEL, hi=0.25 * MAX_LEVEL)
                 for j in range(1, len(knots))]
 
     def constraints(self, ctx: Context) -> list:
