@@ -115,16 +115,16 @@ def sandwich(data: Dataset, J: np.ndarray, e: np.ndarray) -> np.ndarray:
         return np.full((p, p), np.nan)
     A = J.T @ J
     deltas = np.zeros((G, p))
-    for c in range(G):
-        m = cl == c
-        Jc = J[m]
+    # the rows are in time order, so each stretch is a slice (no mask and copy per stretch)
+    for c, (a, b) in enumerate(_stretches(cl)):
+        Jc = J[a:b]
         Ac = A - Jc.T @ Jc
         d = np.sqrt(np.maximum(np.diag(Ac), 1e-300))
         try:
             Ai = np.linalg.pinv(Ac / np.outer(d, d), rcond=1e-12) / np.outer(d, d)
         except np.linalg.LinAlgError:
             return np.full((p, p), np.nan)
-        deltas[c] = Ai @ (Jc.T @ e[m])
+        deltas[c] = Ai @ (Jc.T @ e[a:b])
     # a cluster without which the columns are (nearly) singular throws its estimate
     # out of range: no standard error can be read from such a jackknife
     with np.errstate(over='ignore', invalid='ignore'):
@@ -174,6 +174,15 @@ def t_scale(dof: int) -> float:
     return float(stdtrit(dof, 0.975)) / z
 
 
+def _stretches(ids: np.ndarray) -> list[tuple[int, int]]:
+    """Return ``(start, stop)`` of each run of equal ``ids`` (0, 1, … in row order)."""
+    cut = np.flatnonzero(np.diff(ids)) + 1
+    edges = [0] + cut.tolist() + [len(ids)]
+    if len(edges) - 1 != int(ids[-1]) + 1 or ids[0] != 0:
+        raise ValueError('cluster ids must be 0, 1, … in row order')
+    return list(zip(edges[:-1], edges[1:]))
+
+
 def block_sandwich(data: Dataset, J: np.ndarray, e: np.ndarray) -> np.ndarray:
     """Return the cluster-robust sandwich with the validation blocks as clusters (CR1).
 
@@ -187,8 +196,9 @@ def block_sandwich(data: Dataset, J: np.ndarray, e: np.ndarray) -> np.ndarray:
     except np.linalg.LinAlgError:
         return np.full(G.shape, np.nan)
     nb = int(data.block.max()) + 1
-    S = np.zeros((nb, J.shape[1]))
-    np.add.at(S, data.block, J * e[:, None])
+    # each block a slice of the rows (time order): its sums in one pass (np.add.at took
+    # half of this function's time)
+    S = np.add.reduceat(J * e[:, None], [a for a, _ in _stretches(data.block)], axis=0)
     c = nb / max(nb - 1, 1) * (len(e) - 1) / max(len(e) - J.shape[1], 1)
     return c * Ginv @ (S.T @ S) @ Ginv
 

@@ -55,3 +55,54 @@ def test_a_parameter_no_stretch_moved_is_not_resolved_not_exact():
     # nor one read from a covariance that could not be computed
     assert math.isnan(delta_se(lambda v: v[('presliding', 'c')], vals, idx,
                                np.full((2, 2), np.nan)))
+
+
+def _direct_jackknife(run_id, block, J, e, clusters):
+    """The delete-a-stretch jackknife written from its definition, one mask per stretch."""
+    import numpy as np
+    cl = np.zeros(len(e), dtype=int)
+    G = 0
+    for i in np.unique(run_id):
+        m = run_id == i
+        b = block[m]
+        nb = int(b.max() - b.min()) + 1
+        g = min(clusters, nb)
+        cl[m] = G + ((b - b.min()) * g) // nb
+        G += g
+    A = J.T @ J
+    deltas = np.array([np.linalg.pinv(A - J[cl == c].T @ J[cl == c]) @ (J[cl == c].T @ e[cl == c])
+                       for c in range(G)])
+    deltas -= deltas.mean(axis=0)
+    return (G - 1) / G * deltas.T @ deltas * t_scale(G - 1) ** 2
+
+
+def test_the_sandwiches_are_their_definitions():
+    """Stretches and blocks taken as slices of the rows give the masks' covariances."""
+    import types
+
+    import numpy as np
+
+    from motor_comp.workbench.uncertainty import block_sandwich, sandwich
+    rng = np.random.default_rng(7)
+    for trial in range(40):
+        runs = rng.integers(1, 4)
+        sizes = [rng.integers(1, 7, rng.integers(3, 40)) for _ in range(runs)]
+        first = np.cumsum([0] + [len(s) for s in sizes])
+        block = np.concatenate([np.repeat(np.arange(len(s)), s) + first[k]
+                                for k, s in enumerate(sizes)])
+        run_id = np.concatenate([np.full(int(s.sum()), k) for k, s in enumerate(sizes)])
+        p = int(rng.integers(1, 5))
+        J = rng.normal(size=(len(block), p))
+        e = rng.normal(size=len(block))
+        if len(e) <= p + 2:
+            continue
+        data = types.SimpleNamespace(run_id=run_id, block=block)
+        want = _direct_jackknife(run_id, block, J, e, SE_CLUSTERS)
+        np.testing.assert_allclose(sandwich(data, J, e), want, rtol=1e-8,
+                                   atol=1e-12 * np.max(np.abs(want)))
+        nb = int(block.max()) + 1
+        S = np.array([(J[block == b] * e[block == b, None]).sum(axis=0) for b in range(nb)])
+        c = nb / max(nb - 1, 1) * (len(e) - 1) / max(len(e) - p, 1)
+        Gi = np.linalg.pinv(J.T @ J)
+        np.testing.assert_allclose(block_sandwich(data, J, e), c * Gi @ (S.T @ S) @ Gi,
+                                   rtol=1e-8, atol=1e-12)
