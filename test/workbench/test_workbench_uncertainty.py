@@ -106,3 +106,24 @@ def test_the_sandwiches_are_their_definitions():
         Gi = np.linalg.pinv(J.T @ J)
         np.testing.assert_allclose(block_sandwich(data, J, e), c * Gi @ (S.T @ S) @ Gi,
                                    rtol=1e-8, atol=1e-12)
+
+
+def test_a_fit_at_huge_values_gives_no_correlation_and_no_warning():
+    """Columns that overflow the sandwich (a fit at its declared bounds) read as NaN, quietly."""
+    import types
+    import warnings
+
+    import numpy as np
+
+    from motor_comp.workbench.uncertainty import block_sandwich, correlations
+    rng = np.random.default_rng(3)
+    block = np.repeat(np.arange(12), 5)
+    data = types.SimpleNamespace(run_id=np.zeros(len(block), int), block=block)
+    J = rng.normal(size=(len(block), 3))
+    J[:, 2] *= 1e100
+    e = rng.normal(size=len(block)) * 1e60
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        cov = block_sandwich(data, J, e)
+        assert np.all(np.isnan(cov))
+        assert correlations(cov, [('a', 'x'), ('b', 'y'), ('c', 'z')]) == []
