@@ -195,73 +195,64 @@ def variables(data: Dataset, spec: Spec, model: Any, r: np.ndarray) -> dict[str,
 
 
 class _Bins:
-    """The bins of one scanned variable ``z`` and the folds' rows, shared by its scans.
+    """The bins of one scanned variable ``z`` and its rows' folds, shared by its scans.
 
     A variable is scanned against the residual and its direction-signed twin, at each
-    bin count of :data:`BINS`: its quantile edges and bin indices are computed once per
-    bin count, the folds' row indices once per scan (the same sums as before, taken
-    from index arrays instead of boolean masks).
+    bin count of :data:`BINS`: its quantile edges, the bin of each row and the rows
+    of each (fold, bin) are found once per bin count.  Rows where ``z`` is not finite
+    (no reversal yet) are in no bin.
     """
 
-    def __init__(self, z: np.ndarray, folds: tuple) -> None:
-        self.z = z
+    def __init__(self, z: np.ndarray, fold: np.ndarray, folds: int) -> None:
         self.ok = np.isfinite(z)
         self.zs = z[self.ok]
-        self.folds = folds if bool(self.ok.all()) else None
+        self.fold = fold[self.ok]
+        self.folds = folds
         self._by: dict = {}
 
-    def at(self, bins: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """Return the edges and each row's bin at ``bins`` quantile bins (None: too few)."""
+    def at(self, bins: int) -> tuple | None:
+        """Return edges, bins, (fold, bin) keys and counts at ``bins`` bins (None: too few)."""
         if bins not in self._by:
             got = None
             if len(self.zs) >= 4 * bins:
                 edges = np.unique(np.quantile(self.zs, np.linspace(0.0, 1.0, bins + 1)))
                 if len(edges) >= 3:
-                    idx = np.clip(np.searchsorted(edges, self.z, side='right') - 1, 0,
-                                  len(edges) - 2)
-                    got = (edges, idx)
+                    nb = len(edges) - 1
+                    idx = np.clip(np.searchsorted(edges, self.zs, side='right') - 1, 0,
+                                  nb - 1)
+                    key = self.fold * nb + idx
+                    count = np.bincount(key, minlength=self.folds * nb)
+                    got = (edges, idx, key, count.reshape(self.folds, nb))
             self._by[bins] = got
         return self._by[bins]
 
 
-def _fold_rows(fold: np.ndarray, folds: int) -> tuple:
-    """Return each fold's (training, held-out) row indices."""
-    return tuple((np.flatnonzero(fold != f), np.flatnonzero(fold == f)) for f in range(folds))
+def _cv_share(zb: _Bins, r: np.ndarray, bins: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """Held-out energy share of ``r`` a step function of ``z`` removes, and its bins.
 
-
-def _cv_share(zb: _Bins, r: np.ndarray, fold: np.ndarray, folds: int,
-              bins: int) -> tuple[float, np.ndarray, np.ndarray]:
-    """Held-out energy share of ``r`` a step function of ``z`` removes, and its bins."""
+    Each fold's held-out rows are predicted by the bin means of the other folds' rows:
+    the sums per (fold, bin) in one pass, a fold's training sums all rows' less its own.
+    """
     got = zb.at(bins)
     if got is None:
         return 0.0, np.zeros(0), np.zeros(0)
-    edges, idx = got
-    ok = zb.ok
-    nb = len(edges) - 1
-    removed = 0.0
-    total = 0.0
-    for f in range(folds):
-        tr, te = zb.folds[f] if zb.folds is not None else \
-            (ok & (fold != f), ok & (fold == f))
-        cnt = np.bincount(idx[tr], minlength=nb)
-        s = np.bincount(idx[tr], weights=r[tr], minlength=nb)
-        mean = np.where(cnt > 0, s / np.maximum(cnt, 1), 0.0)
-        rt = r[te]
-        pred = mean[idx[te]]
-        e = rt @ rt
-        total += float(e)
-        removed += float(e - (rt - pred) @ (rt - pred))
-    cnt = np.bincount(idx[ok], minlength=nb)
-    s = np.bincount(idx[ok], weights=r[ok], minlength=nb)
+    edges, idx, key, count = got
+    rk = r[zb.ok]
+    sums = np.bincount(key, weights=rk, minlength=count.size).reshape(count.shape)
+    s, cnt = sums.sum(axis=0), count.sum(axis=0)
+    tr_s, tr_cnt = s - sums, cnt - count
+    mean = np.where(tr_cnt > 0, tr_s / np.maximum(tr_cnt, 1), 0.0)
+    d = rk - mean[zb.fold, idx]
+    total = float(rk @ rk)
+    removed = total - float(d @ d)
     return (removed / total if total > 0 else 0.0), edges, np.where(cnt > 0, s / np.maximum(
         cnt, 1), 0.0)
 
 
-def _best(zb: _Bins, r: np.ndarray, fold: np.ndarray, folds: int) \
-        -> tuple[float, np.ndarray, np.ndarray]:
+def _best(zb: _Bins, r: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     best = (0.0, np.zeros(0), np.zeros(0))
     for b in BINS:
-        got = _cv_share(zb, r, fold, folds, b)
+        got = _cv_share(zb, r, b)
         if got[0] > best[0]:
             best = got
     return best
@@ -282,13 +273,11 @@ def _scanned(name: str, z: np.ndarray) -> np.ndarray:
 def _scans(vars_: dict, r: np.ndarray, fold: np.ndarray, folds: int) -> dict:
     out = {}
     sgn = vars_['speed_sign']
-    rows = _fold_rows(fold, folds)
     for name in ('position', 'velocity', 'force', 'time', 'reversal'):
-        z = vars_[name]
-        zb = _Bins(_scanned(name, z), rows)
+        zb = _Bins(_scanned(name, vars_[name]), fold, folds)
         for odd in (False, True):
             rr = r * sgn if odd else r
-            out[(name, odd)] = _best(zb, rr, fold, folds)
+            out[(name, odd)] = _best(zb, rr)
     return out
 
 
