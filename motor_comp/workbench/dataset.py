@@ -144,6 +144,8 @@ class Dataset:
         self.n_eff = max(n_full, 2.0)
         ends = np.append(self.starts[1:], self.n)
         self._part_bounds = list(zip(self.starts.tolist(), ends.tolist()))
+        self._fold_w = (np.array(self._train_parts, dtype=float),
+                        np.array(self._test_parts, dtype=float))
         self._cache: dict = {}
         self._cache_max = max(400, COLUMN_CACHE_BYTES // (8 * max(self.n, 1)))
         self._gram: dict = {}
@@ -236,6 +238,65 @@ class Dataset:
         for i, (a, b) in enumerate(self._part_bounds):
             np.matmul(Z[a:b].T, Z[a:b], out=out[i])
         return out
+
+    def part_grams_of(self, cols: Sequence[np.ndarray], keys: Sequence[tuple | None]) \
+            -> np.ndarray:
+        """Return :meth:`part_grams` of ``cols``, reusing cached entries by column key.
+
+        What :meth:`gram` does for all rows, per part: a held-out score of trials that
+        change one group of columns (a delay's drive force, a fold's choices among 77
+        of them) computes the new columns' products alone.  Each product is summed per
+        part in one pass over the rows (``np.add.reduceat`` at the part starts).
+        """
+        q = len(cols)
+        ids = self._key_ids
+        if len(ids) > 100_000:
+            ids.clear()
+            self._gram.clear()
+        ks = [None if k is None else ids.setdefault(k, len(ids)) for k in keys]
+        cache = self._gram
+        P = np.empty((len(self._part_bounds), q, q))
+        missing = []
+        for i in range(q):
+            ki = ks[i]
+            if ki is None:
+                missing.append(i)
+                continue
+            for j in range(i + 1):
+                kj = ks[j]
+                v = None if kj is None else cache.get(('parts', ki, kj))
+                if v is None:
+                    missing.append(i)
+                    break
+                P[:, i, j] = P[:, j, i] = v
+        if missing:
+            Z = np.array(cols)
+            if len(cache) > 200_000:
+                cache.clear()
+            for i in missing:
+                M = np.add.reduceat(Z * Z[i], self.starts, axis=1)    # (q, parts)
+                P[:, i, :] = M.T
+                P[:, :, i] = M.T
+                ki = ks[i]
+                if ki is None:
+                    continue
+                for kj, m in zip(ks, M):
+                    if kj is not None:
+                        cache[('parts', ki, kj)] = cache[('parts', kj, ki)] = m
+        return P
+
+    def fold_grams(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return each fold's training and held-out Grams from per-part ones ``P``.
+
+        Shapes (folds, q, q): the sums of the parts in :attr:`train_parts` and
+        :attr:`test_parts`, all folds in one product each (a fold choosing among 77
+        trials summed its parts 4 × 77 times).
+        """
+        k, q = P.shape[0], P.shape[1]
+        flat = P.reshape(k, q * q)
+        f = self.folds
+        return (self._fold_w[0] @ flat).reshape(f, q, q), \
+            (self._fold_w[1] @ flat).reshape(f, q, q)
 
     @property
     def train_parts(self) -> list[np.ndarray]:

@@ -21,7 +21,7 @@ from motor_comp.physics.effects import TERMS
 from motor_comp.workbench.bands import SpeedWeights
 from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.library import Spec, design
-from motor_comp.workbench.lsq import cv_grams, solve_gram, sse_with
+from motor_comp.workbench.lsq import Bounds, solve_gram, sse_with
 from motor_comp.workbench.repeats import REPEATS, block_cv
 from motor_comp.workbench.varpro import fold_trials, refine_structure, search, searched, \
     vp_sse
@@ -31,26 +31,28 @@ def cv_design(data: Dataset, spec: Spec, model: AxisModel | None,
               weights: SpeedWeights | None = None) -> tuple[float, float]:
     """Return the held-out and in-sample SSE of ``spec`` (bounded least squares)."""
     d = design(data, spec, model, weights=weights)
-    P = data.part_grams(np.column_stack([d.X, d.y]))
+    P = d.part_grams()
     _, sse = solve_gram(P.sum(axis=0), d.bounds)
-    return cv_grams(P, data.train_parts, data.test_parts, d.bounds), sse
+    return _held_out(data, P, d.bounds), sse
+
+
+def _held_out(data: Dataset, P: np.ndarray, bounds: Bounds) -> float:
+    """Return the held-out SSE over the folds from per-part Grams ``P``."""
+    train, test = data.fold_grams(P)
+    return sum(sse_with(te, solve_gram(tr, bounds)[0]) for tr, te in zip(train, test))
 
 
 def cv_choices(data: Dataset, specs: Sequence[Spec], model: AxisModel | None) -> float:
     """Return the held-out SSE when each fold picks, on its training rows, the best spec."""
-    Ps = []
+    best: list = [None] * data.folds
     for s in specs:
         d = design(data, s, model)
-        Ps.append((data.part_grams(np.column_stack([d.X, d.y])), d.bounds))
-    total = 0.0
-    for tr, te in zip(data.train_parts, data.test_parts):
-        best = None
-        for P, b in Ps:
-            th, sse = solve_gram(P[tr].sum(axis=0), b)
-            if best is None or sse < best[0]:
-                best = (sse, th, P)
-        total += sse_with(best[2][te].sum(axis=0), best[1])
-    return total
+        train, test = data.fold_grams(d.part_grams())
+        for f, (tr, te) in enumerate(zip(train, test)):
+            th, sse = solve_gram(tr, d.bounds)
+            if best[f] is None or sse < best[f][0]:
+                best[f] = (sse, th, te)
+    return sum(sse_with(te, th) for _, th, te in best)
 
 
 @dataclasses.dataclass(frozen=True)

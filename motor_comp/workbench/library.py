@@ -210,6 +210,10 @@ class Design:
         """Return the augmented Gram ``[X y]ᵀ[X y]`` over ``rows`` (cached entries reused)."""
         return self.view.data.gram(self.cols + [self.y], self.keys + [self.ykey], rows)
 
+    def part_grams(self) -> np.ndarray:
+        """Return the per-part augmented Gram, shape (parts, q, q) (cached entries reused)."""
+        return self.view.data.part_grams_of(self.cols + [self.y], self.keys + [self.ykey])
+
     def solve(self, rows: np.ndarray | None = None) -> tuple[np.ndarray, float]:
         """Return θ and the SSE of the bounded least squares over ``rows``."""
         return solve_gram(self.gram(rows), self.bounds)

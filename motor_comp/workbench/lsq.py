@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Sequence
 
 import numpy as np
 from numba import njit
@@ -436,22 +435,12 @@ class Score:
     n_params: int
 
 
-def cv_grams(P: np.ndarray, train: Sequence[np.ndarray], test: Sequence[np.ndarray],
-             bounds: Bounds | None = None) -> float:
-    """Return the held-out SSE over folds from per-part Grams ``P`` and part masks."""
-    total = 0.0
-    for tr, te in zip(train, test):
-        th, _ = solve_gram(P[tr].sum(axis=0), bounds)
-        total += sse_with(P[te].sum(axis=0), th)
-    return total
-
-
 def bic(n_eff: float, sse0: float, sse1: float, dp: int) -> float:
     """Return the BIC change ``n_eff·ln(SSE₁/SSE₀) + Δp·ln n_eff`` (< 0: pays)."""
     return n_eff * math.log(max(sse1, 1e-300) / max(sse0, 1e-300)) + dp * math.log(n_eff)
 
 
-__all__ = ['Bounds', 'Score', 'bic', 'box_qp', 'cv_grams', 'linear_qp', 'solve_gram',
+__all__ = ['Bounds', 'Score', 'bic', 'box_qp', 'linear_qp', 'solve_gram',
            'solve_grams', 'sse_with']
 
 

@@ -194,6 +194,28 @@ def test_cached_gram_equals_the_direct_product(data, order, fold):
         assert np.allclose(d.gram(rows), ref, rtol=1e-12, atol=1e-12 * np.max(np.abs(ref)))
 
 
+@settings(max_examples=25, deadline=None)
+@given(order=st.lists(st.integers(0, len(SPECS) - 1), min_size=2, max_size=8))
+def test_cached_part_grams_and_fold_sums_equal_their_definitions(data, order):
+    """Per-part Grams from cached products, and each fold's sums, as written with masks."""
+    D, model = data
+    for i in order:
+        d = design(D, SPECS[i], model)
+        Z = np.column_stack(d.cols + [d.y])
+        ref = D.part_grams(Z)
+        P = d.part_grams()
+        scale = np.max(np.abs(ref))
+        assert np.allclose(P, ref, rtol=1e-12, atol=1e-12 * scale)
+        train, test = D.fold_grams(P)
+        assert train.shape == test.shape == (D.folds,) + ref.shape[1:]
+        for f, (tr, te) in enumerate(zip(D.train_parts, D.test_parts)):
+            assert np.allclose(train[f], ref[tr].sum(axis=0), rtol=1e-12, atol=1e-12 * scale)
+            assert np.allclose(test[f], ref[te].sum(axis=0), rtol=1e-12, atol=1e-12 * scale)
+        # the training rows' Gram is the same product over the fold's rows
+        rows = D.train_rows(0)
+        assert np.allclose(train[0], Z[rows].T @ Z[rows], rtol=1e-12, atol=1e-12 * scale)
+
+
 def test_views_do_not_change_each_other(data):
     """A view with a gap and a delay leaves the measured view's arrays as they were."""
     D, model = data
