@@ -114,17 +114,22 @@ def sandwich(data: Dataset, J: np.ndarray, e: np.ndarray) -> np.ndarray:
     if G < 2 or len(e) <= p:
         return np.full((p, p), np.nan)
     A = J.T @ J
-    deltas = np.zeros((G, p))
     # the rows are in time order, so each stretch is a slice (no mask and copy per stretch)
-    for c, (a, b) in enumerate(_stretches(cl)):
+    parts = _stretches(cl)
+    Acs = np.empty((G, p, p))
+    rhs = np.empty((G, p))
+    for c, (a, b) in enumerate(parts):
         Jc = J[a:b]
-        Ac = A - Jc.T @ Jc
-        d = np.sqrt(np.maximum(np.diag(Ac), 1e-300))
-        try:
-            Ai = np.linalg.pinv(Ac / np.outer(d, d), rcond=1e-12) / np.outer(d, d)
-        except np.linalg.LinAlgError:
-            return np.full((p, p), np.nan)
-        deltas[c] = Ai @ (Jc.T @ e[a:b])
+        Acs[c] = A - Jc.T @ Jc
+        rhs[c] = Jc.T @ e[a:b]
+    d = np.sqrt(np.maximum(np.diagonal(Acs, axis1=1, axis2=2), 1e-300))
+    dd = d[:, :, None] * d[:, None, :]
+    try:
+        # every stretch's pseudo-inverse in one stacked call (the same routine per matrix)
+        Ai = np.linalg.pinv(Acs / dd, rcond=1e-12) / dd
+    except np.linalg.LinAlgError:
+        return np.full((p, p), np.nan)
+    deltas = np.einsum('gij,gj->gi', Ai, rhs)
     # a cluster without which the columns are (nearly) singular throws its estimate
     # out of range: no standard error can be read from such a jackknife
     with np.errstate(over='ignore', invalid='ignore'):
