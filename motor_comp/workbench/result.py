@@ -7,12 +7,17 @@ all rows, the held-out score over the validation folds, the jackknife covariance
 the reported parameters with their standard errors (:mod:`.uncertainty`), the model-file
 form (:func:`.library.encode`), and what the fit says about itself — coefficients that
 ended on a declared bound, and values outside a term's declared domain.
+
+The standard errors and correlations are computed when first read (:class:`Lazy`): a
+selection fits every candidate of every round and reads them for the few it reports or
+whose admissibility depends on them (the ball-screw's ``fit --auto`` makes 62 estimates;
+their Jacobians and jackknives were 0.2 s of it).  Read or not, they are the same numbers.
 """
 from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Mapping
+from typing import Any, Callable, Generic, Mapping, TypeVar
 
 import numpy as np
 
@@ -20,12 +25,40 @@ from motor_comp.physics.axis import AxisKind, AxisModel, Units
 from motor_comp.physics.effects import TERMS
 from motor_comp.workbench.bands import SpeedWeights
 from motor_comp.workbench.dataset import Dataset
-from motor_comp.workbench.library import Spec, context, design, encode, n_params
+from motor_comp.workbench.library import Spec, context, design, encode, n_params, values_of
 from motor_comp.workbench.lsq import solve_gram
 from motor_comp.workbench.uncertainty import block_sandwich, correlations, jacobian, \
-    sandwich, scalars_and_se
+    sandwich, scalars_and_se, scalars_of
 from motor_comp.workbench.heldout import cv_design
 from motor_comp.workbench.wording import MASS, REFIT, ROTARY_UNITS, TITLES, fmt_param, more_words
+
+
+T = TypeVar('T')
+
+
+class Lazy(Generic[T]):
+    """A value computed by ``make()`` when first read, then kept (:meth:`get`)."""
+
+    __slots__ = ('_make', '_value', '_done')
+
+    def __init__(self, make: Callable[[], T]) -> None:
+        self._make = make
+        self._done = False
+
+    @classmethod
+    def of(cls, value: T) -> 'Lazy[T]':
+        """Return a :class:`Lazy` already holding ``value``."""
+        out = cls(lambda: value)
+        out._value, out._done = value, True
+        return out
+
+    def get(self) -> T:
+        """Return the value (computed on the first call)."""
+        if not self._done:
+            self._value = self._make()
+            self._done = True
+            self._make = None          # what it closed over is no longer needed
+        return self._value
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,15 +75,11 @@ class Estimate:
         ``{(term, label): value}`` of every coefficient and free nonlinear parameter.
     scalars : dict[str, dict[str, float]]
         Reported physical parameters per effect (and ``mass``).
-    se : dict[str, dict[str, float]]
-        Their standard errors (stretch jackknife + delta method).
     at_bound : dict[str, list[str]]
         Coefficients the estimator held on a declared bound (``fc ≥ 0`` …).
     at_limit : dict[str, list[str]]
         Those held on a declared upper limit: the data want the effect beyond what the
         term declares physical (a fit there is not that effect).
-    correlations : list of (str, str, float)
-        Strongly correlated parameter pairs ``(group.name, group.name, ρ)``.
     sse_cv, sse_fit : float
         Held-out and in-sample sums of squared residuals [N²].
     n_params : int
@@ -59,33 +88,50 @@ class Estimate:
         Held-out force NRMSE.
     inadmissible : dict[str, str]
         Why a term's fitted values lie outside its declared domain, per term.
+    uncertainty : Lazy
+        ``(se, correlations)``, computed when first read: see :attr:`se` and
+        :attr:`correlations`.
     """
 
     spec: Spec
     model: AxisModel
     values: dict
     scalars: dict
-    se: dict
     at_bound: dict
-    correlations: list
     sse_cv: float
     sse_fit: float
     n_params: int
     nrmse_cv: float
     inadmissible: dict = dataclasses.field(default_factory=dict)
     at_limit: dict = dataclasses.field(default_factory=dict)
+    uncertainty: Lazy = dataclasses.field(default_factory=lambda: Lazy.of(({}, [])),
+                                          compare=False, repr=False)
+
+    @property
+    def se(self) -> dict:
+        """Standard errors of :attr:`scalars` (stretch jackknife + delta method)."""
+        return self.uncertainty.get()[0]
+
+    @property
+    def correlations(self) -> list:
+        """Strongly correlated parameter pairs ``(group.name, group.name, ρ)``."""
+        return self.uncertainty.get()[1]
 
 
 def estimate(data: Dataset, spec: Spec, model: AxisModel, *, cv: bool = True,
              weights: SpeedWeights | None = None) -> Estimate:
     """Fit ``spec`` on all rows: θ, covariance, reported parameters, model, score."""
-    jac = jacobian(data, spec, model, weights)
-    cov = sandwich(data, jac.J, jac.e)
-    vals = dict(jac.values)
-    sc, se = scalars_and_se(spec, vals, jac.labels, cov, data)
-    corr = correlations(block_sandwich(data, jac.J, jac.e), jac.labels)
     d = design(data, spec, model, weights=weights)
-    th, _ = solve_gram(d.gram(), d.bounds)
+    th, sse_fit = solve_gram(d.gram(), d.bounds)
+    vals = values_of(spec, d.labels, th)
+    sc = scalars_of(spec, vals, data)
+
+    def uncertainty() -> tuple[dict, list]:
+        jac = jacobian(data, spec, model, weights)
+        _, se = scalars_and_se(spec, dict(jac.values), jac.labels,
+                               sandwich(data, jac.J, jac.e), data)
+        return se, correlations(block_sandwich(data, jac.J, jac.e), jac.labels)
+    unc = Lazy(uncertainty)
     at_bound: dict[str, list[str]] = {}
     at_limit: dict[str, list[str]] = {}
     for lab, hit, v, hi in zip(d.labels, d.bounds.at_bound(th), th, d.bounds.hi):
@@ -98,27 +144,33 @@ def estimate(data: Dataset, spec: Spec, model: AxisModel, *, cv: bool = True,
     why = {}
     for n in spec.names:
         reason = TERMS[n].admissible(vals, spec.of(n), data.summary) or \
-            _unresolved(data, spec, n, se)
+            _unresolved(data, spec, n, lambda: unc.get()[0])
         if reason:
             why[n] = reason
         elif n in at_limit:
             why[n] = (f'{", ".join(at_limit[n])} at the limit the effect declares physical: '
                       'the data want it beyond what it can be')
-    return Estimate(spec=spec, model=encode(spec, vals, model), values=vals, scalars=sc, se=se,
-                    at_bound=at_bound, correlations=corr, sse_cv=sse_cv, sse_fit=jac.sse,
+    return Estimate(spec=spec, model=encode(spec, vals, model), values=vals, scalars=sc,
+                    at_bound=at_bound, sse_cv=sse_cv, sse_fit=sse_fit,
                     n_params=n_params(spec), nrmse_cv=nr, inadmissible=why,
-                    at_limit=at_limit)
+                    at_limit=at_limit, uncertainty=unc)
 
 
-def _unresolved(data: Dataset, spec: Spec, name: str, se: Mapping) -> str:
-    """Return why ``name`` is not resolved: a parameter within 2 SE of what the run resolves."""
+def _unresolved(data: Dataset, spec: Spec, name: str, se: Callable[[], Mapping]) -> str:
+    """Return why ``name`` is not resolved: a parameter within 2 SE of what the run resolves.
+
+    ``se()`` returns the standard errors (called only for a parameter that declares it
+    must be resolved and is not at its least value already).
+    """
     eta = spec.of(name)
     for p in TERMS[name].space(data.summary, context(spec, data)):
         if not p.resolved or p.vector or p.name not in eta:
             continue
         v = float(eta[p.name])
-        s = se.get(name, {}).get(p.name, float('nan'))
-        near = v <= p.lo * (1.0 + 1e-6) or (math.isfinite(s) and v - 2.0 * s <= p.lo)
+        near = v <= p.lo * (1.0 + 1e-6)
+        if not near:
+            s = se().get(name, {}).get(p.name, float('nan'))
+            near = math.isfinite(s) and v - 2.0 * s <= p.lo
         if near:
             return (f'{p.name} {v:.3g} is within two standard errors of the least this run '
                     f'resolves ({p.lo:.3g})')
@@ -144,8 +196,8 @@ class CandidateResult:
         Held-out force NRMSE with the candidate.
     params : dict
         Physical parameters of the effect (model-file form, SI).
-    uncertainty, scalars : dict[str, float]
-        Reported parameters and their standard errors.
+    scalars : dict[str, float]
+        Reported parameters.
     n_params : int
         Parameters it adds.
     bic_delta : float
@@ -154,8 +206,12 @@ class CandidateResult:
         Whether it pays for its parameters.
     model : AxisModel
         The jointly refitted model with the candidate.
-    changes : tuple of ParameterChange
-        Parameters of the model that moved significantly in the joint refit.
+    details : Lazy
+        ``(uncertainty, changes, correlations)``, computed when first read: the
+        reported parameters' standard errors, the parameters of the model that moved
+        significantly in the joint refit (:class:`~.wording.ParameterChange`), and
+        strongly correlated pairs (:attr:`uncertainty`, :attr:`changes`,
+        :attr:`correlations`).
     why_not : str
         Why it is outside its declared domain ('' when inside).
     base_nrmse : float
@@ -169,21 +225,35 @@ class CandidateResult:
     explained: float
     force_nrmse: float
     params: dict
-    uncertainty: dict
     scalars: dict
     n_params: int
     bic_delta: float
     supported: bool
     model: AxisModel
-    changes: tuple = ()
+    details: Lazy = dataclasses.field(default_factory=lambda: Lazy.of(({}, (), ())),
+                                      compare=False, repr=False)
     units: Units = Units.of(AxisKind.LINEAR)
-    correlations: tuple = ()
     spec: Any = None
     at_bound: bool = False
     why_not: str = ''
     estimate: Any = None
     base_nrmse: float = float('nan')
     stops: bool = False
+
+    @property
+    def uncertainty(self) -> dict:
+        """Standard errors of :attr:`scalars`."""
+        return self.details.get()[0]
+
+    @property
+    def changes(self) -> tuple:
+        """Parameters of the model that moved significantly in the joint refit."""
+        return self.details.get()[1]
+
+    @property
+    def correlations(self) -> tuple:
+        """Strongly correlated parameter pairs of the joint refit."""
+        return self.details.get()[2]
 
     @property
     def title(self) -> str:
@@ -222,4 +292,4 @@ class CandidateResult:
                 'model': self.model.to_dict()}
 
 
-__all__ = ['CandidateResult', 'Estimate', 'estimate', 'replace']
+__all__ = ['CandidateResult', 'Estimate', 'Lazy', 'estimate', 'replace']

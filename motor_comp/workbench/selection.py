@@ -82,7 +82,7 @@ from motor_comp.workbench.library import Spec, candidates, given_sse, n_params, 
     processing_for, spec_key, spec_of
 from motor_comp.workbench.lookahead import pair, simpler
 from motor_comp.workbench.lsq import bic
-from motor_comp.workbench.result import CandidateResult, Estimate, estimate
+from motor_comp.workbench.result import CandidateResult, Estimate, Lazy, estimate
 from motor_comp.workbench.elimination import Step, backward, prune, vector as _vector
 from motor_comp.workbench.heldout import cv_candidate, cv_design
 from motor_comp.workbench.varpro import refine_structure, search
@@ -371,13 +371,17 @@ class Engine:
             ok = False
         eff = est.model.get(name)
         before = {g: v for g, v in model_scalars(self.model).items() if g != name}
+
+        # read when shown: most candidates' standard errors never are
+        def details() -> tuple[dict, tuple, tuple]:
+            return ({k: float(v) for k, v in est.se.get(name, {}).items()},
+                    tuple(significant_changes(before, est)), tuple(est.correlations))
         return CandidateResult(
             effect=name, explained=explained, force_nrmse=self.nrmse(sse, D),
             params=eff.params() if eff is not None else {},
-            uncertainty={k: float(v) for k, v in est.se.get(name, {}).items()},
             scalars=dict(est.scalars.get(name, {})), n_params=dp, bic_delta=b,
-            supported=ok, model=est.model, changes=tuple(significant_changes(before, est)),
-            units=self.units, correlations=tuple(est.correlations), spec=est.spec,
+            supported=ok, model=est.model, details=Lazy(details),
+            units=self.units, spec=est.spec,
             at_bound=bool(est.at_bound.get(name)), why_not=why_not,
             estimate=est, base_nrmse=self.nrmse(sse0, D), stops=D.processing.turns)
 
@@ -431,10 +435,11 @@ class Engine:
             effect=MASS if only_mass else REFIT, explained=explained,
             force_nrmse=self.nrmse(est.sse_cv, D),
             params={'mass': model.mass, 'effects': {e.name: e.params() for e in model.effects}},
-            uncertainty={key(c): c.se for c in changes},
             scalars={key(c): c.fitted for c in changes}, n_params=est.n_params, bic_delta=b,
-            supported=ok and bool(changes), model=model, changes=changes, units=self.units,
-            correlations=tuple(est.correlations), spec=est.spec, estimate=est,
+            supported=ok and bool(changes), model=model,
+            details=Lazy(lambda: ({key(c): c.se for c in changes}, changes,
+                                  tuple(est.correlations))),
+            units=self.units, spec=est.spec, estimate=est,
             base_nrmse=self.nrmse(sse_given, D), stops=D.processing.turns)
 
 

@@ -267,6 +267,16 @@ def reported(spec: Spec, data: Dataset | None = None) \
     return out
 
 
+def scalars_of(spec: Spec, vals: Mapping, data: Dataset | None = None) -> dict:
+    """Return the reported parameters grouped by effect (:func:`scalars_and_se`'s first)."""
+    sc: dict[str, dict[str, float]] = {}
+    for (g, k), fn in reported(spec, data).items():
+        sc.setdefault(g, {})[k] = float(fn(vals))
+    if not spec.mass_free:
+        sc['mass'] = {'mass': float(spec.mass)}
+    return sc
+
+
 def scalars_and_se(spec: Spec, vals: Mapping, labels: list, cov: np.ndarray,
                    data: Dataset | None = None) -> tuple[dict, dict]:
     """Return the reported parameters and their SEs, grouped by effect."""
@@ -436,4 +446,4 @@ def profile_se(data: Dataset, spec: Spec, model: AxisModel | None, name: str, pa
 
 __all__ = ['CORRELATED', 'Jacobian', 'SE_CLUSTERS', 'block_sandwich', 'correlations',
            'delta_se', 'jacobian', 'measurement_spread', 'processing_spread', 'profile_se',
-           'reported', 'sandwich', 'scalars_and_se', 'T975', 't_scale']
+           'reported', 'sandwich', 'scalars_and_se', 'scalars_of', 'T975', 't_scale']
