@@ -127,3 +127,30 @@ def test_a_fit_at_huge_values_gives_no_correlation_and_no_warning():
         cov = block_sandwich(data, J, e)
         assert np.all(np.isnan(cov))
         assert correlations(cov, [('a', 'x'), ('b', 'y'), ('c', 'z')]) == []
+
+
+def test_standard_errors_read_late_are_those_computed_at_once():
+    """An estimate computes its SEs when first read: the same numbers, not before."""
+    import numpy as np
+
+    from motor_comp.workbench import kinematics
+    from motor_comp.workbench.dataset import Dataset
+    from motor_comp.workbench.library import spec_of
+    from motor_comp.workbench.result import estimate
+    from motor_comp.workbench.synthetic import scenario
+    from motor_comp.workbench.uncertainty import block_sandwich, correlations, jacobian, \
+        sandwich, scalars_and_se
+    sc = scenario(('stribeck',), seed=2)
+    kin = kinematics(sc.run(duration=6.0, seed=2))
+    D = Dataset([kin], sc.plant)
+    spec = spec_of(sc.plant)
+    est = estimate(D, spec, sc.plant)
+    assert not est.uncertainty._done                 # nothing read yet: nothing computed
+    jac = jacobian(D, spec, sc.plant)
+    scalars, se = scalars_and_se(spec, dict(jac.values), jac.labels,
+                                 sandwich(D, jac.J, jac.e), D)
+    assert est.scalars == scalars
+    assert est.se == se                              # computed now, to the bit
+    assert est.uncertainty._done
+    assert est.correlations == correlations(block_sandwich(D, jac.J, jac.e), jac.labels)
+    assert se['coulomb']['fc'] > 0 and np.isfinite(se['coulomb']['fc'])
