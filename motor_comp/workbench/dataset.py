@@ -248,42 +248,10 @@ class Dataset:
         of them) computes the new columns' products alone.  Each product is summed per
         part in one pass over the rows (``np.add.reduceat`` at the part starts).
         """
-        q = len(cols)
-        ids = self._key_ids
-        if len(ids) > 100_000:
-            ids.clear()
-            self._gram.clear()
-        ks = [None if k is None else ids.setdefault(k, len(ids)) for k in keys]
-        cache = self._gram
-        P = np.empty((len(self._part_bounds), q, q))
-        missing = []
-        for i in range(q):
-            ki = ks[i]
-            if ki is None:
-                missing.append(i)
-                continue
-            for j in range(i + 1):
-                kj = ks[j]
-                v = None if kj is None else cache.get(('parts', ki, kj))
-                if v is None:
-                    missing.append(i)
-                    break
-                P[:, i, j] = P[:, j, i] = v
-        if missing:
-            Z = np.array(cols)
-            if len(cache) > 200_000:
-                cache.clear()
-            for i in missing:
-                M = np.add.reduceat(Z * Z[i], self.starts, axis=1)    # (q, parts)
-                P[:, i, :] = M.T
-                P[:, :, i] = M.T
-                ki = ks[i]
-                if ki is None:
-                    continue
-                for kj, m in zip(ks, M):
-                    if kj is not None:
-                        cache[('parts', ki, kj)] = cache[('parts', kj, ki)] = m
-        return P
+        def products(Z: np.ndarray, missing: list[int]) -> list:
+            # (q, parts) per missing column: its products with every column, per part
+            return [np.add.reduceat(Z * Z[i], self.starts, axis=1) for i in missing]
+        return self._products(cols, keys, 'parts', (len(self._part_bounds),), products)
 
     def fold_grams(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return each fold's training and held-out Grams from per-part ones ``P``.
@@ -344,8 +312,24 @@ class Dataset:
         changed per trial: the products among the unchanged columns are computed once,
         the trial columns' products at each trial (O(n·k·p) instead of O(n·p²)).
         """
-        q = len(cols)
         rid = self.rows_id(rows)
+
+        def products(Z: np.ndarray, missing: list[int]) -> list:
+            if rows is not None:
+                Z = Z[:, rows]
+            return list(Z[missing] @ Z.T)
+        return self._products(cols, keys, rid, (), products)
+
+    def _products(self, cols: Sequence[np.ndarray], keys: Sequence[tuple | None], tag: Any,
+                  lead: tuple, products: Any) -> np.ndarray:
+        """Return the products of ``cols`` (shape ``lead + (q, q)``), cached by column key.
+
+        Entry ``[..., i, j]`` is cached under ``(tag, key_i, key_j)`` (``tag`` names the
+        rows they are summed over); ``products(Z, missing)`` returns, for each column
+        index in ``missing``, its products with every column (``Z`` the columns as rows
+        of one array), shape ``(q,) + lead``.
+        """
+        q = len(cols)
         # each key named once by a small number: the pairs' lookups then hash three
         # integers, not two nested key tuples (most of this method's time, q² of them)
         ids = self._key_ids
@@ -354,7 +338,7 @@ class Dataset:
             self._gram.clear()
         ks = [None if k is None else ids.setdefault(k, len(ids)) for k in keys]
         cache = self._gram
-        G = np.empty((q, q))
+        out = np.empty(lead + (q, q))
         missing = []
         for i in range(q):
             ki = ks[i]
@@ -363,30 +347,28 @@ class Dataset:
                 continue
             for j in range(i + 1):
                 kj = ks[j]
-                v = None if kj is None else cache.get((rid, ki, kj))
+                v = None if kj is None else cache.get((tag, ki, kj))
                 if v is None:
                     missing.append(i)
                     break
-                G[i, j] = G[j, i] = v
+                out[..., i, j] = out[..., j, i] = v
         if missing:
             # the columns as rows of one array (each a contiguous copy; a stack along
             # axis 1 transposed them element by element)
-            Z = np.array(cols)
-            if rows is not None:
-                Z = Z[:, rows]
-            M = Z[missing] @ Z.T
+            rows_of = products(np.array(cols), missing)
             if len(cache) > 200_000:
                 cache.clear()
-            for a, i in enumerate(missing):
-                G[i, :] = M[a]
-                G[:, i] = M[a]
+            for i, M in zip(missing, rows_of):
+                Mt = M.T
+                out[..., i, :] = Mt
+                out[..., :, i] = Mt
                 ki = ks[i]
                 if ki is None:
                     continue
-                for kj, v in zip(ks, M[a].tolist()):
+                for kj, v in zip(ks, M.tolist() if not lead else M):
                     if kj is not None:
-                        cache[(rid, ki, kj)] = cache[(rid, kj, ki)] = v
-        return G
+                        cache[(tag, ki, kj)] = cache[(tag, kj, ki)] = v
+        return out
 
 
 class View:
