@@ -338,7 +338,9 @@ class Dataset:
             self._gram.clear()
         ks = [None if k is None else ids.setdefault(k, len(ids)) for k in keys]
         cache = self._gram
-        out = np.empty(lead + (q, q))
+        # filled as (q, q) + lead: a pair's entry is out[i, j] (plain indexing, the
+        # loop's cost), returned as lead + (q, q)
+        out = np.empty((q, q) + lead)
         missing = []
         for i in range(q):
             ki = ks[i]
@@ -351,7 +353,7 @@ class Dataset:
                 if v is None:
                     missing.append(i)
                     break
-                out[..., i, j] = out[..., j, i] = v
+                out[i, j] = out[j, i] = v
         if missing:
             # the columns as rows of one array (each a contiguous copy; a stack along
             # axis 1 transposed them element by element)
@@ -359,16 +361,15 @@ class Dataset:
             if len(cache) > 200_000:
                 cache.clear()
             for i, M in zip(missing, rows_of):
-                Mt = M.T
-                out[..., i, :] = Mt
-                out[..., :, i] = Mt
+                out[i] = M
+                out[:, i] = M
                 ki = ks[i]
                 if ki is None:
                     continue
                 for kj, v in zip(ks, M.tolist() if not lead else M):
                     if kj is not None:
                         cache[(tag, ki, kj)] = cache[(tag, kj, ki)] = v
-        return out
+        return np.ascontiguousarray(np.moveaxis(out, (0, 1), (-2, -1))) if lead else out
 
 
 class View:
