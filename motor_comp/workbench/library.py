@@ -60,7 +60,9 @@ class Spec:
         """Return a copy with ``name`` added or its nonlinear parameters replaced."""
         e = dict(self.eta)
         e[name] = dict(eta) if eta is not None else dict(e.get(name, {}))
-        names = tuple(n for n in ORDER if n in set(self.names) | {name})
+        present = set(self.names)
+        present.add(name)
+        names = tuple(n for n in ORDER if n in present)
         return Spec(names, e, self.mass_free, self.mass)
 
     def without(self, name: str) -> 'Spec':

@@ -537,11 +537,10 @@ class PreslidingTerm(Term):
         dists = tuple(float(d) for d in eta['d'])
         c = float(eta['c'])
         ratio, vs, dl = self._shape(eta, ctx)
-        inv = np.array([1.0 / d for d in dists])
+        inv = [1.0 / d for d in dists]
         tdamp = tuple(float(t) for t in eta.get('tdamp', ()))
         if len(tdamp) != len(dists):      # no damping, or a structure the search changed
             tdamp = (0.0,) * len(dists)
-        td = np.array(tdamp)
 
         # one block per element: the elements are independent given the path, so a
         # search that moves one distance recomputes one column, not all (the polish
@@ -551,7 +550,7 @@ class PreslidingTerm(Term):
                 xg = np.ascontiguousarray(p.xg)
                 curve = p.memo(('gms_curve', ratio, vs, dl),
                                lambda: gms_unit_curve_entry(xg, 1.0 + ratio, vs, dl, p.dt))
-                return gms_unit_column_entry(xg, curve, float(inv[j]), c, p.dt, float(td[j]),
+                return gms_unit_column_entry(xg, curve, inv[j], c, p.dt, tdamp[j],
                                              _decays(p, (ratio, vs, dl, c), len(xg)))
             return block
         return [Column(f'b{j}', ('gms', d, c, ratio, vs, dl, t), block_of(j), lo=0.0)
