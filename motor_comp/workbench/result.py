@@ -28,7 +28,7 @@ from motor_comp.workbench.dataset import Dataset
 from motor_comp.workbench.library import Spec, context, design, encode, n_params, values_of
 from motor_comp.workbench.lsq import solve_gram
 from motor_comp.workbench.uncertainty import block_sandwich, correlations, jacobian, \
-    sandwich, scalars_and_se, scalars_of
+    sandwich, scalars_of, standard_errors
 from motor_comp.workbench.heldout import cv_design
 from motor_comp.workbench.wording import MASS, REFIT, ROTARY_UNITS, TITLES, fmt_param, more_words
 
@@ -88,7 +88,7 @@ class Estimate:
         Held-out force NRMSE.
     inadmissible : dict[str, str]
         Why a term's fitted values lie outside its declared domain, per term.
-    uncertainty : Lazy
+    details : Lazy
         ``(se, correlations)``, computed when first read: see :attr:`se` and
         :attr:`correlations`.
     """
@@ -104,18 +104,18 @@ class Estimate:
     nrmse_cv: float
     inadmissible: dict = dataclasses.field(default_factory=dict)
     at_limit: dict = dataclasses.field(default_factory=dict)
-    uncertainty: Lazy = dataclasses.field(default_factory=lambda: Lazy.of(({}, [])),
-                                          compare=False, repr=False)
+    details: Lazy = dataclasses.field(default_factory=lambda: Lazy.of(({}, [])),
+                                      compare=False, repr=False)
 
     @property
     def se(self) -> dict:
         """Standard errors of :attr:`scalars` (stretch jackknife + delta method)."""
-        return self.uncertainty.get()[0]
+        return self.details.get()[0]
 
     @property
     def correlations(self) -> list:
         """Strongly correlated parameter pairs ``(group.name, group.name, ρ)``."""
-        return self.uncertainty.get()[1]
+        return self.details.get()[1]
 
 
 def estimate(data: Dataset, spec: Spec, model: AxisModel, *, cv: bool = True,
@@ -128,8 +128,8 @@ def estimate(data: Dataset, spec: Spec, model: AxisModel, *, cv: bool = True,
 
     def uncertainty() -> tuple[dict, list]:
         jac = jacobian(data, spec, model, weights)
-        _, se = scalars_and_se(spec, dict(jac.values), jac.labels,
-                               sandwich(data, jac.J, jac.e), data)
+        se = standard_errors(spec, dict(jac.values), jac.labels,
+                             sandwich(data, jac.J, jac.e), data)
         return se, correlations(block_sandwich(data, jac.J, jac.e), jac.labels)
     unc = Lazy(uncertainty)
     at_bound: dict[str, list[str]] = {}
@@ -153,7 +153,7 @@ def estimate(data: Dataset, spec: Spec, model: AxisModel, *, cv: bool = True,
     return Estimate(spec=spec, model=encode(spec, vals, model), values=vals, scalars=sc,
                     at_bound=at_bound, sse_cv=sse_cv, sse_fit=sse_fit,
                     n_params=n_params(spec), nrmse_cv=nr, inadmissible=why,
-                    at_limit=at_limit, uncertainty=unc)
+                    at_limit=at_limit, details=unc)
 
 
 def _unresolved(data: Dataset, spec: Spec, name: str, se: Callable[[], Mapping]) -> str:

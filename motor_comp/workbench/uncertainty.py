@@ -115,10 +115,9 @@ def sandwich(data: Dataset, J: np.ndarray, e: np.ndarray) -> np.ndarray:
         return np.full((p, p), np.nan)
     A = J.T @ J
     # the rows are in time order, so each stretch is a slice (no mask and copy per stretch)
-    parts = _stretches(cl)
     Acs = np.empty((G, p, p))
     rhs = np.empty((G, p))
-    for c, (a, b) in enumerate(parts):
+    for c, (a, b) in enumerate(_stretches(cl)):
         Jc = J[a:b]
         Acs[c] = A - Jc.T @ Jc
         rhs[c] = Jc.T @ e[a:b]
@@ -268,7 +267,7 @@ def reported(spec: Spec, data: Dataset | None = None) \
 
 
 def scalars_of(spec: Spec, vals: Mapping, data: Dataset | None = None) -> dict:
-    """Return the reported parameters grouped by effect (:func:`scalars_and_se`'s first)."""
+    """Return the reported parameters grouped by effect."""
     sc: dict[str, dict[str, float]] = {}
     for (g, k), fn in reported(spec, data).items():
         sc.setdefault(g, {})[k] = float(fn(vals))
@@ -277,19 +276,16 @@ def scalars_of(spec: Spec, vals: Mapping, data: Dataset | None = None) -> dict:
     return sc
 
 
-def scalars_and_se(spec: Spec, vals: Mapping, labels: list, cov: np.ndarray,
-                   data: Dataset | None = None) -> tuple[dict, dict]:
-    """Return the reported parameters and their SEs, grouped by effect."""
+def standard_errors(spec: Spec, vals: Mapping, labels: list, cov: np.ndarray,
+                    data: Dataset | None = None) -> dict:
+    """Return the SEs of :func:`scalars_of`'s parameters (delta method), grouped by effect."""
     idx = {lab: i for i, lab in enumerate(labels)}
-    sc: dict[str, dict[str, float]] = {}
     se: dict[str, dict[str, float]] = {}
     for (g, k), fn in reported(spec, data).items():
-        sc.setdefault(g, {})[k] = float(fn(vals))
         se.setdefault(g, {})[k] = delta_se(fn, vals, idx, cov) if idx else float('nan')
     if not spec.mass_free:
-        sc['mass'] = {'mass': float(spec.mass)}
         se['mass'] = {'mass': float('nan')}
-    return sc, se
+    return se
 
 
 def _gauss_newton_values(data: Dataset, spec: Spec, model: AxisModel | None,
@@ -446,4 +442,4 @@ def profile_se(data: Dataset, spec: Spec, model: AxisModel | None, name: str, pa
 
 __all__ = ['CORRELATED', 'Jacobian', 'SE_CLUSTERS', 'block_sandwich', 'correlations',
            'delta_se', 'jacobian', 'measurement_spread', 'processing_spread', 'profile_se',
-           'reported', 'sandwich', 'scalars_and_se', 'scalars_of', 'T975', 't_scale']
+           'reported', 'sandwich', 'scalars_of', 'standard_errors', 'T975', 't_scale']

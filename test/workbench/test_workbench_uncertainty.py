@@ -139,18 +139,18 @@ def test_standard_errors_read_late_are_those_computed_at_once():
     from motor_comp.workbench.result import estimate
     from motor_comp.workbench.synthetic import scenario
     from motor_comp.workbench.uncertainty import block_sandwich, correlations, jacobian, \
-        sandwich, scalars_and_se
+        sandwich, scalars_of, standard_errors
     sc = scenario(('stribeck',), seed=2)
     kin = kinematics(sc.run(duration=6.0, seed=2))
     D = Dataset([kin], sc.plant)
     spec = spec_of(sc.plant)
     est = estimate(D, spec, sc.plant)
-    assert not est.uncertainty._done                 # nothing read yet: nothing computed
+    assert not est.details._done                 # nothing read yet: nothing computed
     jac = jacobian(D, spec, sc.plant)
-    scalars, se = scalars_and_se(spec, dict(jac.values), jac.labels,
-                                 sandwich(D, jac.J, jac.e), D)
+    scalars = scalars_of(spec, dict(jac.values), D)
+    se = standard_errors(spec, dict(jac.values), jac.labels, sandwich(D, jac.J, jac.e), D)
     assert est.scalars == scalars
     assert est.se == se                              # computed now, to the bit
-    assert est.uncertainty._done
+    assert est.details._done
     assert est.correlations == correlations(block_sandwich(D, jac.J, jac.e), jac.labels)
     assert se['coulomb']['fc'] > 0 and np.isfinite(se['coulomb']['fc'])
