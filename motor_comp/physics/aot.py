@@ -162,10 +162,19 @@ def _check(t) -> Callable[[Any], bool]:
     if isinstance(t, types.Array):
         dt, nd, ro = np.dtype(str(t.dtype)), t.ndim, t.mutable is False
 
-        def ok(a) -> bool:
-            return (type(a) is np.ndarray and a.dtype == dt and a.ndim == nd
-                    and a.flags.c_contiguous and (ro or a.flags.writeable))
-        return ok
+        if ro:
+            def ok(a) -> bool:
+                return (type(a) is np.ndarray and a.dtype == dt and a.ndim == nd
+                        and a.flags.c_contiguous)
+            return ok
+
+        def ok_w(a) -> bool:
+            # one flags object for both tests (each attribute read builds one)
+            if type(a) is not np.ndarray or a.dtype != dt or a.ndim != nd:
+                return False
+            f = a.flags
+            return f.c_contiguous and f.writeable
+        return ok_w
     kinds = {'float64': (float, np.float64), 'int64': (int, np.int64),
              'bool': (bool, np.bool_)}[str(t)]
     return lambda a: type(a) in kinds
@@ -191,8 +200,14 @@ def entry(dispatcher: Callable) -> Callable:
     n = len(checks)
 
     def call(*args):
-        if len(args) == n and all(c(a) for c, a in zip(checks, args)):
-            return fast(*args)
+        # a plain loop, not all() over a generator: the guard is most of a small
+        # kernel's call (~10⁴ calls a fit)
+        if len(args) == n:
+            for c, a in zip(checks, args):
+                if not c(a):
+                    break
+            else:
+                return fast(*args)
         return dispatcher(*args)
     call.__name__ = call.__qualname__ = fn.__name__
     call.__doc__ = fn.__doc__

@@ -341,15 +341,19 @@ class Dataset:
         # filled as (q, q) + lead: a pair's entry is out[i, j] (plain indexing, the
         # loop's cost), returned as lead + (q, q)
         out = np.empty((q, q) + lead)
-        missing = []
+        missing: list[int] = []
         for i in range(q):
             ki = ks[i]
             if ki is None:
                 missing.append(i)
                 continue
             for j in range(i + 1):
+                if j in missing:
+                    # the pair comes with column j's products: a trial's new column
+                    # does not make every later column's products computed again
+                    continue
                 kj = ks[j]
-                v = None if kj is None else cache.get((tag, ki, kj))
+                v = cache.get((tag, ki, kj))
                 if v is None:
                     missing.append(i)
                     break
