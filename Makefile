@@ -38,10 +38,11 @@ demo: $(STAMP) $(AOT_STAMP)
 	$(PY) -m motor_comp.cli.main demo --out demo_out
 
 # two workers, one test file each at a time (--dist loadfile: a module's fixtures are
-# computed once), CPU-bound workbench files beside the node tests; then the tests that
-# need the machine to themselves (wall-clock timing, marker `alone`), one at a time
+# computed once), CPU-bound workbench files beside the node tests, the longest files
+# first (test/conftest.py LONGEST_FIRST; --no-loadscope-reorder keeps that order); then
+# the tests that need the machine to themselves (wall-clock timing, marker `alone`)
 test: $(STAMP) $(AOT_STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider -n 2 --dist loadfile -m 'not alone' test
+	$(PY) -m pytest -q -p no:cacheprovider -n 2 --dist loadfile --no-loadscope-reorder -m 'not alone' test
 	$(PY) -m pytest -q -p no:cacheprovider -m alone test
 
 lint: $(STAMP)

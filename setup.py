@@ -55,7 +55,7 @@ setup(
             'pytest>=7',
             'pytest-timeout',
             # `make test` runs the suite on two workers, a test file per worker at a time
-            'pytest-xdist>=3',
+            'pytest-xdist>=3.6',   # --no-loadscope-reorder
             'hypothesis>=6',
             'flake8',
             'pydocstyle',
