@@ -14,14 +14,14 @@ import pytest
 #: (``--dist loadfile --no-loadscope-reorder``) in collection order, so these start
 #: first and the many short files fill in behind them.  xdist's own order (most tests
 #: first) started them last: one worker ran the autotune loop alone for the last
-#: ~90 s.  A stale entry only makes the split less even, never a test different.
+#: ~90 s.  The node tests keep their place (they wait on DDS more than they compute,
+#: and are not put beside the suites' two-process pools on purpose).  A stale entry
+#: only makes the split less even, never a test different.
 LONGEST_FIRST = (
     'tuning/test_tuning_autotune.py',           # 180 s: three autotune loops in lockstep
     'workbench/test_workbench_independent.py',  # 172 s: the suite's fits, two processes
     'workbench/test_workbench_diagnosis.py',    # 121 s
     'workbench/test_workbench_coverage.py',     # 83 s
-    'nodes/test_nodes_live.py',                 # 58 s
-    'nodes/test_nodes_loop.py',                 # 40 s
 )
 
 
