@@ -9,6 +9,8 @@ cached columns — and a view never changes what another view returns.
 """
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -214,6 +216,37 @@ def test_cached_part_grams_and_fold_sums_equal_their_definitions(data, order):
         # the training rows' Gram is the same product over the fold's rows
         rows = D.train_rows(0)
         assert np.allclose(train[0], Z[rows].T @ Z[rows], rtol=1e-12, atol=1e-12 * scale)
+
+
+_EXAMPLES = itertools.count()
+
+
+@settings(max_examples=25, deadline=None)
+@given(q=st.integers(2, 6), new=st.data(), seed=st.integers(0, 2**31 - 1))
+def test_a_trials_new_column_anywhere_gives_the_gram_of_its_columns(data, q, new, seed):
+    """Cached products with new columns anywhere in the design: the Grams as defined.
+
+    A search trial replaces one term's columns, often in the middle of the design: the
+    pairs of the later columns with the new one come with the new column's products,
+    the rest from the cache.
+    """
+    D, _ = data
+    rng = np.random.default_rng(seed)
+    run = next(_EXAMPLES)        # a key names one column's values: one set per example
+    cols = [rng.standard_normal(D.n) for _ in range(q)]
+    keys = [('test-gram', run, i) for i in range(q)]
+    D.gram(cols, keys)
+    D.part_grams_of(cols, keys)
+    # replace a random set of columns by new ones under new keys
+    fresh = new.draw(st.lists(st.integers(0, q - 1), min_size=1, max_size=q, unique=True))
+    for i in fresh:
+        cols[i] = rng.standard_normal(D.n)
+        keys[i] = ('test-gram', run, i, 'new')
+    Z = np.column_stack(cols)
+    scale = float(np.max(np.abs(Z.T @ Z)))
+    np.testing.assert_allclose(D.gram(cols, keys), Z.T @ Z, rtol=1e-12, atol=1e-12 * scale)
+    np.testing.assert_allclose(D.part_grams_of(cols, keys), D.part_grams(Z), rtol=1e-12,
+                               atol=1e-12 * scale)
 
 
 def test_views_do_not_change_each_other(data):
