@@ -8,9 +8,10 @@ about 0.15 s of CPU in every ``fit`` and ``diagnose``, half the 0.33 s a whole
 ``diagnose`` of a 20 s run may take by the speed goal of issue 22.  Only what the
 workbench asks of them is provided: a bounded scalar search to an absolute tolerance,
 a simplex search from a given simplex to absolute tolerances on the points and the
-costs, and a damped Gauss–Newton search of a few bounded coordinates on a residual
-vector (the variable-projection residual of :mod:`.varpro`: Golub & Pereyra's own
-method) to absolute tolerances on the step and the fall of the cost.
+costs (also stopped where the costs agree to a resolution the caller gives: scipy's
+iterates until then), and a damped Gauss–Newton search of a few bounded coordinates on
+a residual vector (the variable-projection residual of :mod:`.varpro`: Golub & Pereyra's
+own method) to absolute tolerances on the step and the fall of the cost.
 
 References: R. P. Brent, *Algorithms for Minimization without Derivatives* (1973), ch. 5;
 G. E. Forsythe, M. A. Malcolm, C. B. Moler, *Computer Methods for Mathematical
@@ -113,13 +114,15 @@ def brent_bounded(f: Callable[[float], float], lo: float, hi: float, *, xatol: f
 
 
 def nelder_mead(f: Callable[[np.ndarray], float], simplex: np.ndarray, *,
-                xatol: float = 1e-4, fatol: float = 1e-4, maxiter: int = 200) -> Minimum:
+                xatol: float = 1e-4, fatol: float = 1e-4, maxiter: int = 200,
+                resolution: float = 0.0) -> Minimum:
     """Return the minimum of ``f`` found by the Nelder–Mead simplex from ``simplex``.
 
     ``simplex`` holds ``n + 1`` points of ``n`` coordinates.  Reflection 1, expansion 2,
     contraction ½, shrink ½; the search stops when every vertex is within ``xatol`` of
-    the best in each coordinate and every cost within ``fatol`` of the best, or after
-    ``maxiter`` iterations.
+    the best in each coordinate and every cost within ``fatol`` of the best, when every
+    cost is within ``resolution`` > 0 of the best (the vertices are then the same to
+    the caller, however far apart), or after ``maxiter`` iterations.
     """
     sim = np.array(simplex, dtype=float)
     n = sim.shape[1]
@@ -128,8 +131,9 @@ def nelder_mead(f: Callable[[np.ndarray], float], simplex: np.ndarray, *,
     order = np.argsort(fsim)
     sim, fsim = sim[order], fsim[order]
     for _ in range(1, maxiter):
-        if np.max(np.abs(sim[1:] - sim[0])) <= xatol and \
-                np.max(np.abs(fsim[0] - fsim[1:])) <= fatol:
+        spread = np.max(np.abs(fsim[0] - fsim[1:]))
+        if (resolution > 0.0 and spread <= resolution) or \
+                (np.max(np.abs(sim[1:] - sim[0])) <= xatol and spread <= fatol):
             break
         centre = np.add.reduce(sim[:-1], 0) / n
         worst = sim[-1]

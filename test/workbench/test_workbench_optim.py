@@ -75,6 +75,38 @@ def test_nelder_mead_finds_a_bowls_minimum():
     assert got.fun < 1e-9
 
 
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(1, 4), seed=st.integers(0, 2 ** 16), resolution=st.floats(1e-8, 1e-1))
+def test_nelder_mead_at_a_resolution_takes_the_same_iterates_and_stops_sooner(
+        n, seed, resolution):
+    """A resolution only ends the search: the costs it takes are the first ones without."""
+    rng = np.random.default_rng(seed)
+    f = _rosen_like(rng.uniform(0.5, 2.0, n))
+    sim = np.vstack([np.zeros(n), 0.05 * np.eye(n)]) + rng.normal(size=n)
+    full, short = [], []
+    want = nelder_mead(lambda q: full.append(f(q)) or full[-1], sim, xatol=1e-6,
+                       fatol=1e-12, maxiter=300)
+    got = nelder_mead(lambda q: short.append(f(q)) or short[-1], sim, xatol=1e-6,
+                      fatol=1e-12, maxiter=300, resolution=resolution)
+    assert short == full[:len(short)] and got.nfev == len(short) <= want.nfev
+    assert got.fun == min(short)
+
+
+def test_nelder_mead_stops_where_the_costs_agree_to_the_resolution():
+    """A direction the cost barely sees is not searched to ``xatol`` (a GMS's unresolved C).
+
+    The first coordinate is resolved, the second changes the cost by 1e-9 over its
+    range: at a resolution of 1e-6 the search ends once the first is within about
+    √1e-6 of its minimum, in a fraction of the costs the points' tolerance takes.
+    """
+    f = lambda q: float((q[0] - 0.3) ** 2 + 1e-9 * np.tanh(q[1]) ** 2)  # noqa: E731
+    sim = np.array([[1.0, 1.0], [1.05, 1.0], [1.0, 1.05]])
+    full = nelder_mead(f, sim, xatol=1e-4, fatol=1e-14, maxiter=2000)
+    got = nelder_mead(f, sim, xatol=1e-4, fatol=1e-14, maxiter=2000, resolution=1e-6)
+    assert abs(got.x[0] - 0.3) <= 2e-3 and got.fun <= 2e-6
+    assert got.nfev < 0.5 * full.nfev
+
+
 def _decays(rng: np.random.Generator, k: int):
     """A sum of ``k`` decays ``a_j·exp(−t/τ_j)`` on log-rates: what a search of shapes sees.
 
