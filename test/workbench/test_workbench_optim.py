@@ -93,7 +93,7 @@ def test_nelder_mead_at_a_resolution_takes_the_same_iterates_and_stops_sooner(
 
 
 def test_nelder_mead_stops_where_the_costs_agree_to_the_resolution():
-    """A direction the cost barely sees is not searched to ``xatol`` (a GMS's unresolved C).
+    """A direction the cost barely sees is not searched to ``xatol`` (one the run never resolves).
 
     The first coordinate is resolved, the second changes the cost by 1e-9 over its
     range: at a resolution of 1e-6 the search ends once the first is within about
