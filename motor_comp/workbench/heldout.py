@@ -69,27 +69,39 @@ class CandidateCV:
 
 
 def cv_candidate(data: Dataset, spec: Spec, name: str, model: AxisModel | None, *,
-                 screen: float = 0.0, start: Mapping | None = None,
+                 screen: float = 0.0, least: Callable[[], float] | None = None,
+                 start: Mapping | None = None,
                  refused: Callable[[dict], bool] | None = None) -> CandidateCV:
     """Return the held-out SSE of ``spec`` + ``name`` (η chosen in-fold) and the all-data η.
 
     With ``screen`` > 0, a candidate whose all-data (in-sample) gain is below
     ``screen`` is scored with its nonlinear parameters held at the all-data choice
-    (it cannot pay on held-out data anyway, and the in-fold choices are the cost);
-    so is one that ``refused(η)`` says cannot be taken whatever its score (fitted
-    outside the term's declared domain).  ``start`` is where the search of the
-    nonlinear parameters starts (default the grid).
+    (it cannot pay on held-out data anyway, and the in-fold choices are the cost),
+    and its search stops at the starts when even the best gains less than half of
+    ``screen``.  ``least()``, called only for a candidate past those, is the least
+    held-out share any term could pay with against ``spec``
+    (:meth:`.selection.Engine.least_share`: above ``2·screen`` when the model is
+    within reach of its noise floor, infinite where nothing could pay): the same
+    screen and stop then hold at half and a quarter of it.  A candidate that
+    ``refused(η)`` says cannot be taken whatever its score (fitted outside the term's
+    declared domain) is scored at its all-data choice too.  ``start`` is where the
+    search of the nonlinear parameters starts (default the grid).
     """
     t = TERMS[name]
     if not searched(t):
         return CandidateCV(cv_design(data, spec.with_(name), model)[0], {})
     sse0 = vp_sse(data, spec, model) if screen > 0 else math.inf
+    bars: list = [sse0 * (1.0 - 0.5 * screen)]
+    if screen > 0 and least is not None:
+        bars.append(lambda: sse0 * (1.0 - 0.25 * least()) if math.isfinite(least())
+                    else -math.inf)
     eta_all = search(data, spec.with_(name, dict(start or {})), name, model,
-                     stop_above=sse0 * (1.0 - 0.5 * screen), refine=screen <= 0)
+                     stop_above=bars, refine=screen <= 0)
     s1 = spec.with_(name, eta_all)
     if screen > 0:
         sse1 = vp_sse(data, s1, model)
-        if sse0 <= 0 or 1.0 - sse1 / sse0 < screen:
+        gain = 1.0 - sse1 / sse0 if sse0 > 0 else 0.0
+        if sse0 <= 0 or gain < screen or (least is not None and gain < 0.5 * least()):
             return CandidateCV(cv_design(data, s1, model)[0], eta_all)
         eta_all = refine_structure(data, s1, name, model)
     if refused is not None and refused(eta_all):

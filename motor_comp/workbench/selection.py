@@ -33,7 +33,12 @@
   judged on the sliding rows only, where the twin replicates the run.  Its
   fitted values must lie in the term's declared domain (one fitted outside it is
   scored at its all-data fit, not chosen again in each fold: nothing it explains could
-  make it pay), and bounds hold inside the estimator.
+  make it pay), and bounds hold inside the estimator.  Work whose only use is a
+  verdict is not done where no verdict could turn on it: a candidate whose all-data
+  share is below half the least held-out share any term could pay with in its round
+  (:meth:`Engine.least_share`: ``min_gain``, or most of the residual once the model is
+  within its floor's reach, or nothing on rows where the run cannot refute the floor)
+  is scored at its all-data fit, and its local search stops at the starts.
 * **Forward** adds the supported candidate with the best held-out BIC — or the first of
   two simpler ones that together beat a flexible one with its own best simpler
   follow-up (two steps against two); when none pays alone, two strong ones that pay
@@ -150,6 +155,8 @@ class Engine:
         self._scored: dict = {}
         #: models after a term joined and the others were searched again (:meth:`joined`)
         self._joined: dict = {}
+        #: the least held-out share that could pay, by spec and rows (:meth:`_least_share`)
+        self._least: dict = {}
         #: the given model on the rows it is judged on (the figure ``compare`` reports)
         self.given_data = self.data_for(spec_of(model))
         self.sse_given = given_sse(self.given_data, model)
@@ -269,6 +276,25 @@ class Engine:
         f = self._floor_nrmse(sse0, data, floor)
         return self.nrmse(sse0, data) - f >= self._least_fall(f)
 
+    def least_share(self, sse0: float, data: Dataset, *,
+                    floor: float | Callable[[], float] = 0.0,
+                    placebo: Callable[[], float] | None = None) -> float:
+        """Return the least held-out share a model leaving less than ``sse0`` could pay with.
+
+        The dual of :meth:`can_pay`, for the same use (work whose only use is a
+        verdict: a candidate's in-fold choices and local search, skipped when its
+        all-data share is below half of this, :func:`.heldout.cv_candidate`).  It is
+        ``min_gain`` while some fall could pass :meth:`pays`; else only a term that
+        removes most of the residual and refutes the floor could pay
+        (:data:`MOST_OF_EXCESS`), and only with a ``placebo`` to refute it with;
+        without one nothing could (infinite).
+        """
+        if self.can_pay(sse0, data, floor=floor):
+            return self.min_gain
+        if placebo is not None:
+            return max(self.min_gain, MOST_OF_EXCESS)
+        return math.inf
+
     def h0(self, model: AxisModel) -> Estimate:
         """Refit the model's own terms, every parameter (nonlinear ones re-searched)."""
         spec = spec_of(model)
@@ -329,6 +355,7 @@ class Engine:
         # a candidate scored in an earlier round starts from its optimum there; one
         # fitted outside its domain is refused whatever it explains: not chosen in-fold
         cand = cv_candidate(D, base.spec, name, base.model, screen=0.5 * self.min_gain,
+                            least=lambda: self._least_share(base, D, sse0),
                             start=self._warm.get(name),
                             refused=lambda eta: bool(fitted(eta).inadmissible.get(name)))
         sse, eta = cand.sse_cv, cand.eta
@@ -337,11 +364,13 @@ class Engine:
         spec = base.spec.with_(name, eta)
         est = fitted(eta)
         dp = n_params(spec) - n_params(base.spec)
-        # the noise floor (a simulation of the run) only when the rule needs it
-        floor = lambda: self.floor_sse(base, D)  # noqa: E731
-        null = self.refuter(base, D, name)
-        ok, explained, b = self.pays(sse0, sse, dp, D, floor=floor, placebo=null)
         why_not = est.inadmissible.get(name, '')
+        # the noise floor (a simulation of the run) only when the rule needs it: not for
+        # a term fitted outside its domain, which no floor makes pay (its share and BIC
+        # do not depend on the floor)
+        floor = (lambda: self.floor_sse(base, D)) if not why_not else 0.0
+        null = self.refuter(base, D, name) if not why_not else None
+        ok, explained, b = self.pays(sse0, sse, dp, D, floor=floor, placebo=null)
         if not ok and not why_not and explained >= self.min_gain and any(
                 TERMS[n].params and not _vector(TERMS[n], D) for n in base.spec.names) \
                 and self.can_pay(sse0, D, floor=floor, placebo=null):
@@ -384,6 +413,16 @@ class Engine:
             units=self.units, spec=est.spec,
             at_bound=bool(est.at_bound.get(name)), why_not=why_not,
             estimate=est, base_nrmse=self.nrmse(sse0, D), stops=D.processing.turns)
+
+    def _least_share(self, base: Estimate, D: Dataset, sse0: float) -> float:
+        """Return :meth:`least_share` against ``base`` on ``D`` (cached: one per round)."""
+        key = (spec_key(base.spec), id(D))
+        hit = self._least.get(key)
+        if hit is None:
+            hit = self._least[key] = self.least_share(
+                sse0, D, floor=lambda: self.floor_sse(base, D),
+                placebo=self.refuter(base, D, ''))
+        return hit
 
     def refuter(self, base: Estimate, D: Dataset, name: str) -> Callable[[], float] | None:
         """Return the placebo :meth:`pays` may refute the floor with, or None.

@@ -227,21 +227,24 @@ class Search:
         t = type(self.term)
         return t.initial is not Term.initial or t.derive is not Term.derive
 
-    def run(self, eta0: Mapping, *, stop_above: float = math.inf,
+    def run(self, eta0: Mapping, *, stop_above: float | Callable[[], float] = math.inf,
             refine: bool = True, local: bool = False) -> dict:
         """Return the best nonlinear parameters found (see the module docstring).
 
         When even the best start is above ``stop_above`` (a screened candidate that
-        cannot pay), it is returned without the local search; ``refine=False`` leaves
-        out the growth and polish of vector parameters; ``local=True`` starts from
-        ``eta0`` alone when it holds every parameter (a term's optimum in a model that
-        changed a little), not from the grid.
+        cannot pay), it is returned without the local search; a function returning the
+        bar is called only when the best start is below every float bar given (a
+        sequence holds the cheap bars first).  ``refine=False`` leaves out the growth
+        and polish of vector parameters; ``local=True`` starts from ``eta0`` alone when
+        it holds every parameter (a term's optimum in a model that changed a little),
+        not from the grid.
         """
         trials = [dict(eta0)] if local and self.holds_all(eta0) else self.starts(eta0)
         costs = [self.cost(e) for e in trials]
         i = int(np.argmin(costs))
         eta = trials[i]
-        if costs[i] > stop_above:
+        bars = stop_above if isinstance(stop_above, (tuple, list)) else (stop_above,)
+        if any(costs[i] > (b() if callable(b) else b) for b in bars):
             return eta
         if not self.term.nonlinear(eta):
             # a structure without continuous parameters (the knots of a friction along
@@ -491,7 +494,7 @@ def _freeze(eta: Mapping) -> tuple:
 
 
 def search(data: Dataset, spec: Spec, name: str, model: AxisModel | None,
-           rows: np.ndarray | None = None, *, stop_above: float = math.inf,
+           rows: np.ndarray | None = None, *, stop_above: Any = math.inf,
            refine: bool = True, weights: SpeedWeights | None = None,
            local: bool = False) -> dict:
     """Return the nonlinear parameters of ``name`` in ``spec`` fitted on ``rows``."""

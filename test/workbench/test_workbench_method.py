@@ -160,6 +160,74 @@ def test_can_pay_refuses_a_model_at_its_floor_and_not_one_far_above(sweep_engine
     assert eng.can_pay(sse0, D, floor=(0.99 * n0) ** 2 * D.den, placebo=lambda: 0.0)
 
 
+@settings(max_examples=300, deadline=None)
+@given(st.floats(1e-4, 1.0), st.floats(0.0, 1.0), st.floats(0.0, 2.0), st.integers(1, 12),
+       st.one_of(st.none(), st.floats(0.0, 1.0)))
+def test_least_share_bounds_the_paying_rule(sweep_engine, n0, share, floor_share, dp,
+                                            placebo):
+    """No held-out share below :meth:`Engine.least_share` passes :meth:`Engine.pays`.
+
+    The bound lets a candidate skip its in-fold choices and local search (the screen at
+    half of it) without changing a verdict; it must hold for every fall, every floor
+    and every placebo share (none: the run cannot refute the floor).
+    """
+    eng = sweep_engine
+    D = eng.data
+    sse0 = n0 ** 2 * D.den
+    sse1, floor = share * sse0, floor_share * sse0
+    null = None if placebo is None else (lambda: placebo)
+    if eng.pays(sse0, sse1, dp, D, floor=floor, placebo=null)[0]:
+        assert 1.0 - share >= eng.least_share(sse0, D, floor=floor, placebo=null)
+
+
+def test_least_share_is_the_gain_far_from_the_floor_and_more_near_it(sweep_engine):
+    eng = sweep_engine
+    D = eng.data
+    sse0 = 0.05 ** 2 * D.den
+    assert eng.least_share(sse0, D, floor=0.0) == eng.min_gain
+    near = (0.99 * 0.05) ** 2 * D.den
+    assert eng.least_share(sse0, D, floor=near, placebo=lambda: 0.0) == 0.5
+    assert eng.least_share(sse0, D, floor=near) == math.inf
+
+
+def test_no_in_fold_work_where_no_candidate_could_pay(sweep_engine, monkeypatch):
+    """Where no term could pay, a candidate is held at its best start: no verdict turns on more.
+
+    Neither its local search nor its in-fold choices are made, and its held-out SSE is
+    that of its all-data fit there.  With ``min_gain`` as the least share it is scored
+    exactly as with the plain screen.
+    """
+    from motor_comp.workbench import heldout, varpro
+    from motor_comp.workbench.heldout import cv_candidate, cv_design
+    from motor_comp.workbench.selection import Engine
+    truth = PMLM.replace(effects=PMLM.effects + (
+        make_effect('stribeck', {'fs': 25.0, 'vs': 0.03, 'delta': 2.0}),))
+    dt = 1e-3
+    x, v = sweep_motion([0.01, 0.02, 0.05, 0.1, 0.2, 0.4], stroke=0.05, dt=dt, accel=4.0)
+    kin = kinematics(analytic_run(truth, x, v, dt, noise=0.005, quantum=1e-6, seed=4))
+    eng = Engine([kin], PMLM, folds=8, min_gain=0.1)
+    D = eng.data
+    base = estimate(D, spec_of(PMLM), PMLM)     # the Stribeck rise missing
+    work = []
+    choices, local = heldout.cv_choices, varpro.Search._local
+    monkeypatch.setattr(heldout, 'cv_choices',
+                        lambda *a, **k: work.append('choices') or choices(*a, **k))
+    monkeypatch.setattr(varpro.Search, '_local',
+                        lambda self, *a, **k: work.append('local') or local(self, *a, **k))
+    screen = 0.5 * eng.min_gain
+    plain = cv_candidate(D, base.spec, 'stribeck', base.model, screen=screen)
+    assert work.count('choices') == 1 and work.count('local') >= 1   # past the screen
+    work.clear()
+    held = cv_candidate(D, base.spec, 'stribeck', base.model, screen=screen,
+                        least=lambda: math.inf)
+    assert work == []
+    assert held.sse_cv == cv_design(D, base.spec.with_('stribeck', held.eta), base.model)[0]
+    assert held.sse_cv > plain.sse_cv
+    same = cv_candidate(D, base.spec, 'stribeck', base.model, screen=screen,
+                        least=lambda: eng.min_gain)
+    assert same == plain
+
+
 def test_the_look_ahead_scores_on_the_model_the_step_makes(sweep_engine):
     """A candidate joined once is one model: the look-ahead's and the forward step's."""
     from motor_comp.workbench.selection import research
