@@ -62,7 +62,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence, Union
 
 import numpy as np
 
@@ -127,6 +127,10 @@ def _least_squares(residual: Callable[[np.ndarray], np.ndarray], q0: np.ndarray,
     step = np.array([1e-4 if p.log else 1e-4 * (p.hi - p.lo) for p in params])
     return levenberg_marquardt(residual, q0, lo=lo, hi=hi, step=step, xatol=xatol,
                                fatol=fatol)
+
+
+#: a bar a search's best start must not be above: a number, or a function giving one
+Bar = Union[float, Callable[[], float]]
 
 
 def _to(p: Param, v: float) -> float:
@@ -227,14 +231,14 @@ class Search:
         t = type(self.term)
         return t.initial is not Term.initial or t.derive is not Term.derive
 
-    def run(self, eta0: Mapping, *, stop_above: float | Callable[[], float] = math.inf,
+    def run(self, eta0: Mapping, *, stop_above: Bar | Sequence[Bar] = math.inf,
             refine: bool = True, local: bool = False) -> dict:
         """Return the best nonlinear parameters found (see the module docstring).
 
         When even the best start is above ``stop_above`` (a screened candidate that
-        cannot pay), it is returned without the local search; a function returning the
-        bar is called only when the best start is below every float bar given (a
-        sequence holds the cheap bars first).  ``refine=False`` leaves out the growth
+        cannot pay), it is returned without the local search.  Several bars are tried
+        in turn, a function returning one only when the best start is at or below
+        every bar before it (the cheap bars first).  ``refine=False`` leaves out the growth
         and polish of vector parameters; ``local=True`` starts from ``eta0`` alone when
         it holds every parameter (a term's optimum in a model that changed a little),
         not from the grid.
@@ -494,7 +498,7 @@ def _freeze(eta: Mapping) -> tuple:
 
 
 def search(data: Dataset, spec: Spec, name: str, model: AxisModel | None,
-           rows: np.ndarray | None = None, *, stop_above: Any = math.inf,
+           rows: np.ndarray | None = None, *, stop_above: Bar | Sequence[Bar] = math.inf,
            refine: bool = True, weights: SpeedWeights | None = None,
            local: bool = False) -> dict:
     """Return the nonlinear parameters of ``name`` in ``spec`` fitted on ``rows``."""
