@@ -89,3 +89,33 @@ def test_the_searches_stop_at_the_data_resolution(bare, monkeypatch):
     result = fit(kin, start, auto=True)
     assert 'presliding' in result.model.names
     assert costs and sum(costs) <= COSTS, costs
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    'known, 2026-11-29: the search starts from element families (0.3, 1, 3)·d0 with d0 '
+    'at the declared lower bound (3 encoder quanta), and an element at 0.3× stays there '
+    'when no search moves it (the free search keeps its start unless it gains); the '
+    "plant's own stiffest elements (0.68, 1.2, 1.8 um) lie below the bound too. With the "
+    'starts inside the domain this run gives Coulomb + viscous + Stribeck + a 1.6 ms '
+    'delay instead of pre-sliding; the independent pre-sliding list does not change'))
+def test_the_fitted_presliding_distances_lie_in_the_declared_domain(bare):
+    """Every fitted element distance lies in the domain the pre-sliding term declares.
+
+    The selection holds a term to its declared domain (``../shared/IDENTIFICATION.md``,
+    issue 22 item 2: distances from the sensor's resolution up); a value outside it is
+    no value of the term.
+    """
+    from motor_comp.physics.effects import TERMS
+    from motor_comp.workbench.dataset import Dataset
+    from motor_comp.workbench.library import Spec, context
+    cfg, start = bare
+    kin, _ = _default_run(cfg, start, 1)
+    result = fit(kin, start, auto=True)
+    gms = result.model.get('presliding')
+    assert gms is not None
+    data = Dataset([kin], start)
+    d = next(p for p in TERMS['presliding'].space(data.summary, context(Spec((), {}), data))
+             if p.name == 'd')
+    fc = result.model.fc
+    dists = [a * fc / k for a, k in zip(gms.alpha, gms.k)]
+    assert min(dists) >= d.lo, (dists, d.lo)
