@@ -93,8 +93,10 @@ def cv_candidate(data: Dataset, spec: Spec, name: str, model: AxisModel | None, 
     sse0 = vp_sse(data, spec, model) if screen > 0 else math.inf
     bars: list = [sse0 * (1.0 - 0.5 * screen)]
     if screen > 0 and least is not None:
-        bars.append(lambda: sse0 * (1.0 - 0.25 * least()) if math.isfinite(least())
-                    else -math.inf)
+        def bar() -> float:
+            share = least()
+            return sse0 * (1.0 - 0.25 * share) if math.isfinite(share) else -math.inf
+        bars.append(bar)
     eta_all = search(data, spec.with_(name, dict(start or {})), name, model,
                      stop_above=bars, refine=screen <= 0)
     s1 = spec.with_(name, eta_all)

@@ -419,6 +419,8 @@ class Engine:
         key = (spec_key(base.spec), id(D))
         hit = self._least.get(key)
         if hit is None:
+            # whether the run can refute the floor on these rows is all it asks of the
+            # placebo (never run here), the same for every candidate of the round
             hit = self._least[key] = self.least_share(
                 sse0, D, floor=lambda: self.floor_sse(base, D),
                 placebo=self.refuter(base, D, ''))
