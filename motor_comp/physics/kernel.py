@@ -222,6 +222,10 @@ def _sliding_friction(A, v, d, shift):
     and position-dependent friction, :func:`level_shift`; ``NO_SHIFT`` without them).
     """
     fc = A.fc + d * A.half_dfc + shift
+    if A.fs == A.fc:
+        # no rise (Coulomb alone): the level is fc; the decay's exp was most of the
+        # step of an axis without a Stribeck curve (12.7 against 20 ms for a run)
+        return d * fc
     fs = A.fs + d * A.half_dfc + shift
     return d * stribeck_level(abs(v), fc, fs, A.inv_vs, A.delta)
 
@@ -464,12 +468,6 @@ def plant_advance(P, S, u, f_ext, n_sub, shift_source=None):
 #: of the step with load- and position-dependent friction (a second dispatcher, so the
 #: plain version calls it without recursion)
 _advance_shifted = njit(**_JIT)(getattr(plant_advance, 'py_func', plant_advance))
-
-
-@njit(**_JIT)
-def plant_substep(P, S, u, f_ext):
-    """Advance the axis by one physics step ``P[P_DT]`` (see :func:`plant_advance`)."""
-    plant_advance(P, S, u, f_ext, 1)
 
 
 @njit(**_JIT)

@@ -79,7 +79,9 @@ def _advance(P, S, u, k, n_sub, interp):
         return
     for s in range(n_sub):
         w = (s + 0.5) / n_sub
-        K.plant_advance(P, S, (1.0 - w) * u[k] + w * u[k + 1], 0.0, 1)
+        # np.int64, not the literal 1: a literal is typed Literal[int](1) and compiled
+        # the whole kernel twice more (30 of a fresh build's 60 s), for the same code
+        K.plant_advance(P, S, (1.0 - w) * u[k] + w * u[k + 1], 0.0, np.int64(1))
 
 
 @aot.ahead(*(aot.F8_1D,) * 6, aot.I8_1D, aot.I8, aot.I8, aot.F8_2D, aot.F8_2D, aot.BOOL)
