@@ -3,8 +3,9 @@
 Compiles every kernel declared with :func:`motor_comp.physics.aot.ahead` into one
 extension module next to :mod:`motor_comp.physics.aot`, with a stamp of the sources it
 was built from (the reasons and the runtime side are in that module).  ``make setup``
-runs it; it needs a C compiler and takes 13 s with numba's cache warm, 70–140 s from a
-fresh clone (each entry is JIT-compiled first, for its return type).  On failure it says
+runs it; it needs a C compiler and takes about 20 s with numba's cache warm, 60 s from
+a fresh clone (each entry is JIT-compiled first, for its return type; half of that is
+the plant kernel, once per law).  On failure it says
 so in one line and exits 1, and the commands keep using the JIT.
 """
 from __future__ import annotations
