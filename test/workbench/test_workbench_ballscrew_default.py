@@ -113,8 +113,8 @@ def test_the_fitted_presliding_distances_lie_in_the_declared_domain(bare):
     passes; but on the independent generator, whose elements all lie 3 counts or more
     out, an element at one count stands in for the viscous slope and the mass (+384 %
     and +72 % on two ordinary pre-sliding sines), Σk rises 19–47 % on the complete
-    list's four pre-sliding fits and the suite falls to 307/312.  Three counts is what
-    independent data support.
+    list's four coulomb + viscous + pre-sliding fits and the suite falls to 307/312.
+    Three counts is what independent data support.
     """
     from motor_comp.physics.effects import TERMS
     from motor_comp.workbench.dataset import Dataset
