@@ -29,8 +29,11 @@ AOT_STAMP = motor_comp/physics/_aot_kernels.stamp
 AOT_SOURCES = $(wildcard motor_comp/physics/*.py motor_comp/physics/effects/*.py \
                          motor_comp/workbench/*.py)
 
+# the ahead-of-time build keeps one core busy for about a minute from a fresh clone; the
+# other fills numba's cache of the simulator's loop and the controller's step meanwhile
+# (about 30 s of compiling the first test or node would otherwise do)
 $(AOT_STAMP): $(STAMP) $(AOT_SOURCES)
-	-$(PY) -m motor_comp.physics.aot_build
+	-$(PY) -m motor_comp.control.warm & $(PY) -m motor_comp.physics.aot_build; wait
 
 setup: $(STAMP) $(AOT_STAMP)
 
