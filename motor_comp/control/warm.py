@@ -11,6 +11,7 @@ says so in one line and exits 1; nothing depends on it but start-up times.
 """
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 
@@ -33,8 +34,11 @@ def warm() -> None:
     simulator.simulate(cfg, loop, default_trajectory(cfg), duration=0.05, seed=0)
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
     """``python -m motor_comp.control.warm`` (see the module docstring)."""
+    argparse.ArgumentParser(prog='python -m motor_comp.control.warm',
+                            description="fill numba's cache of the simulator's loop and "
+                                        "the controller's step").parse_args(argv)
     t0 = time.monotonic()
     try:
         warm()
