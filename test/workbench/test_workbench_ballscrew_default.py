@@ -112,10 +112,9 @@ def test_the_fitted_presliding_distances_lie_in_the_declared_domain(bare):
     bound, Σk 1.16e7 ± 3.5e5 N/m, 20 ms prediction 1.82 µm against 1.85), and this test
     passes; but on the independent generator, whose elements lie 2.7 µm or more out
     (counts of 0.5–2 µm), an element at one count stands in for the viscous slope and
-    the mass (+384 %
-    and +72 % on two ordinary pre-sliding sines), Σk rises 19–47 % on the complete
-    list's four coulomb + viscous + pre-sliding fits and the suite falls to 307/312.
-    Three counts is what independent data support.
+    the mass (+384 % and +72 % on two ordinary pre-sliding sines), Σk rises 19–47 % on
+    the complete list's four coulomb + viscous + pre-sliding fits and the suite falls
+    to 307/312.  Three counts is what independent data support.
     """
     from motor_comp.physics.effects import TERMS
     from motor_comp.workbench.dataset import Dataset
